@@ -1,0 +1,28 @@
+//! # activesense-core
+//!
+//! The `#![no_std]`, heap-free heart of activesense, the reference implementation of
+//! "Learning Effective Sparse Sampling Strategies using Deep Active Sensing". Everything
+//! that must run on the instrument controller (a Cortex-M4F with 128 KiB of RAM) lives
+//! here, so that the host simulator and the firmware execute *the same code* and an
+//! episode replayed on either side produces the same actions bit for bit.
+//!
+//! All arithmetic is `f32` through [`libm`] (never `std` intrinsics), which keeps results
+//! identical on x86-64 and on the Cortex-M4F FPU. All storage has fixed capacity
+//! ([`heapless`]); bad external input is a typed error, never a panic.
+//!
+//! | module | paper section |
+//! |---|---|
+//! | [`geometry`] | 3 (SE(2) conventions) |
+//! | [`floorplan`] | 3, 4.1 (the polygonal floor-plan model, ray casting, topological scan) |
+//! | [`agents`] | 3.1, 4.2 (actions, costs, the Table-3 baseline agents) |
+#![no_std]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod agents;
+pub mod floorplan;
+pub mod geometry;
+pub mod math;
+
+pub use floorplan::{FloorPlan, PlanError, RayHit, MAX_VERTICES};
+pub use geometry::{Pose2, Vec2};

@@ -1,0 +1,103 @@
+//! Scalar maths through `libm`.
+//!
+//! Every transcendental and square root in the crate goes through these wrappers so
+//! that the host build and the Cortex-M4F build call the same pure-Rust routines and
+//! round identically (determinism requirement: same episode, same actions).
+
+use core::f32::consts::PI;
+
+/// 2π as f32.
+pub const TAU: f32 = 2.0 * PI;
+
+/// Square root (correctly rounded in both libm and hardware).
+#[inline]
+pub fn sqrt(x: f32) -> f32 {
+    libm::sqrtf(x)
+}
+/// Sine.
+#[inline]
+pub fn sin(x: f32) -> f32 {
+    libm::sinf(x)
+}
+/// Cosine.
+#[inline]
+pub fn cos(x: f32) -> f32 {
+    libm::cosf(x)
+}
+/// Two-argument arc tangent.
+#[inline]
+pub fn atan2(y: f32, x: f32) -> f32 {
+    libm::atan2f(y, x)
+}
+/// Arc cosine, argument clamped into [-1, 1] first.
+#[inline]
+pub fn acos(x: f32) -> f32 {
+    libm::acosf(x.clamp(-1.0, 1.0))
+}
+/// Natural logarithm.
+#[inline]
+pub fn ln(x: f32) -> f32 {
+    libm::logf(x)
+}
+/// Exponential.
+#[inline]
+pub fn exp(x: f32) -> f32 {
+    libm::expf(x)
+}
+/// Absolute value.
+#[inline]
+pub fn abs(x: f32) -> f32 {
+    libm::fabsf(x)
+}
+/// Round down.
+#[inline]
+pub fn floor(x: f32) -> f32 {
+    libm::floorf(x)
+}
+/// Round half away from zero.
+#[inline]
+pub fn round(x: f32) -> f32 {
+    libm::roundf(x)
+}
+
+/// Wraps an angle into [-π, π).
+#[inline]
+pub fn wrap_angle(a: f32) -> f32 {
+    let mut r = a - TAU * floor((a + PI) / TAU);
+    // Guard the rounding edge: floor can leave r == π.
+    if r >= PI {
+        r -= TAU;
+    }
+    if r < -PI {
+        r += TAU;
+    }
+    r
+}
+
+/// Wraps an angle into [0, 2π).
+#[inline]
+pub fn wrap_positive(a: f32) -> f32 {
+    let r = a - TAU * floor(a / TAU);
+    if r >= TAU {
+        r - TAU
+    } else {
+        r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wrap_angle_range() {
+        for i in -100..100 {
+            let a = i as f32 * 0.37;
+            let w = wrap_angle(a);
+            assert!((-PI..PI).contains(&w), "{a} -> {w}");
+            assert!(abs(sin(a) - sin(w)) < 1e-4 && abs(cos(a) - cos(w)) < 1e-4);
+            let p = wrap_positive(a);
+            assert!((0.0..TAU).contains(&p), "{a} -> {p}");
+        }
+    }
+}
