@@ -20,6 +20,7 @@
 #![warn(missing_docs)]
 
 pub mod agents;
+pub mod episode;
 pub mod floorplan;
 pub mod geometry;
 pub mod math;
