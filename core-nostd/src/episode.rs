@@ -134,13 +134,13 @@ mod tests {
         s.apply(Action::RotateRight);
         assert_eq!(s.bearing_index, 53);
         assert!((s.bearing() + TAU / 54.0).abs() < 1e-6);
-        for _ in 0..55 {
+        for _ in 0..56 {
             s.apply(Action::RotateLeft);
         }
         assert_eq!(s.bearing_index, 1);
         s.apply(Action::Measure);
-        assert_eq!((s.actions, s.rotations, s.measurements), (57, 56, 1));
-        assert!((s.cost - (56.0 * 0.005 + 0.05)).abs() < 1e-4);
+        assert_eq!((s.actions, s.rotations, s.measurements), (58, 57, 1));
+        assert!((s.cost - (57.0 * 0.005 + 0.05)).abs() < 1e-4);
         assert!(!s.exhausted());
     }
 

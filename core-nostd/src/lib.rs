@@ -15,6 +15,7 @@
 //! | [`geometry`] | 3 (SE(2) conventions) |
 //! | [`floorplan`] | 3, 4.1 (the polygonal floor-plan model, ray casting, topological scan) |
 //! | [`agents`] | 3.1, 4.2 (actions, costs, the Table-3 baseline agents) |
+//! | [`episode`] | 3.1, 4.2 (episode bookkeeping: encoder bearing, costs, action limit) |
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
