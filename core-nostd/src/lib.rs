@@ -15,6 +15,7 @@
 //! | [`geometry`] | 3 (SE(2) conventions) |
 //! | [`floorplan`] | 3, 4.1 (the polygonal floor-plan model, ray casting, topological scan) |
 //! | [`agents`] | 3.1, 4.2 (actions, costs, the Table-3 baseline agents) |
+//! | [`localization`] | 3.2 (fixed-grid GHT localization: R-table, Algorithms 1–2, belief analysis, staging) |
 //! | [`episode`] | 3.1, 4.2 (episode bookkeeping: encoder bearing, costs, action limit) |
 #![no_std]
 #![forbid(unsafe_code)]
@@ -24,6 +25,7 @@ pub mod agents;
 pub mod episode;
 pub mod floorplan;
 pub mod geometry;
+pub mod localization;
 pub mod math;
 
 pub use floorplan::{FloorPlan, PlanError, RayHit, MAX_VERTICES};
