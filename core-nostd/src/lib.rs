@@ -15,6 +15,7 @@
 //! | [`geometry`] | 3 (SE(2) conventions) |
 //! | [`floorplan`] | 3, 4.1 (the polygonal floor-plan model, ray casting, topological scan) |
 //! | [`agents`] | 3.1, 4.2 (actions, costs, the Table-3 baseline agents) |
+//! | [`episode`] | 3.1, 4.2 (episode bookkeeping: encoder bearing, costs, action limit) |
 //! | [`registration`] | 3.3 (Sparse ICP, Algorithm 4, equation 6; annealed perturbation, Algorithm 3) |
 //! | [`symmetry`] | 3.4 (edge-chain rotational-symmetry detection, Wolter et al. 1985) |
 //! | [`pose_distance`] | 3.4 (symmetry-aware pose distance, Table 2, equations 7–10) |
@@ -23,6 +24,7 @@
 #![warn(missing_docs)]
 
 pub mod agents;
+pub mod episode;
 pub mod floorplan;
 pub mod geometry;
 pub mod math;

@@ -86,7 +86,7 @@ pub enum RegistrationError {
     TooManyObservations,
     /// Fewer than two observations (the rotation is undetermined).
     TooFewObservations,
-    /// Observation `i` has a non-finite bearing or a range outside `(0, MAX_RANGE]`.
+    /// Measurement `i` has a non-finite bearing or a range outside `(0, MAX_RANGE]`.
     InvalidObservation(u8),
     /// The initial pose is not finite.
     InvalidPose,
@@ -114,17 +114,17 @@ impl core::fmt::Display for RegistrationError {
 
 /// One EDM measurement in the scene frame.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Observation {
+pub struct Measurement {
     /// Encoder bearing `β` (rad, scene frame).
     pub bearing: f32,
     /// Measured range `r` (m).
     pub range: f32,
 }
 
-impl Observation {
+impl Measurement {
     /// A measurement `(β, r)`.
     pub fn new(bearing: f32, range: f32) -> Self {
-        Observation { bearing, range }
+        Measurement { bearing, range }
     }
 
     /// The scene point `r·unit(β)`.
@@ -155,7 +155,7 @@ impl Observations {
     }
 
     /// Validates and collects `obs`.
-    pub fn from_slice(obs: &[Observation]) -> Result<Self, RegistrationError> {
+    pub fn from_slice(obs: &[Measurement]) -> Result<Self, RegistrationError> {
         let mut set = Self::new();
         for o in obs {
             set.push(*o)?;
@@ -164,7 +164,7 @@ impl Observations {
     }
 
     /// Adds one measurement.
-    pub fn push(&mut self, o: Observation) -> Result<(), RegistrationError> {
+    pub fn push(&mut self, o: Measurement) -> Result<(), RegistrationError> {
         let i = self.pts.len();
         if i >= MAX_OBSERVATIONS {
             return Err(RegistrationError::TooManyObservations);
@@ -338,7 +338,7 @@ pub struct ErrorSummary {
 struct Pair {
     /// Correspondent on the model (model frame).
     m: Vec2,
-    /// Observation in the scene frame.
+    /// Measurement in the scene frame.
     s: Vec2,
     dist: f32,
     weight: f32,
@@ -784,7 +784,7 @@ mod tests {
             if outliers.contains(&j) {
                 r = 0.4 * hit.range;
             }
-            obs.push(Observation::new(b, r)).unwrap();
+            obs.push(Measurement::new(b, r)).unwrap();
         }
         obs
     }
@@ -859,7 +859,7 @@ mod tests {
         let r = plan(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (0.0, 2.0)]);
         let params = IcpParams::default();
         let cos_max = cos(params.max_incidence);
-        // Observation just outside the right wall but the ray points left (-x): the right
+        // Measurement just outside the right wall but the ray points left (-x): the right
         // wall faces away from the ray; the constrained match is the left wall.
         let o = ObsPoint {
             s: v2(2.05, 0.0),
@@ -1084,20 +1084,20 @@ mod tests {
         let p = &rooms()[0];
         let mut obs = Observations::new();
         assert_eq!(
-            obs.push(Observation::new(0.0, -1.0)),
+            obs.push(Measurement::new(0.0, -1.0)),
             Err(RegistrationError::InvalidObservation(0))
         );
         assert_eq!(
-            obs.push(Observation::new(f32::NAN, 1.0)),
+            obs.push(Measurement::new(f32::NAN, 1.0)),
             Err(RegistrationError::InvalidObservation(0))
         );
-        obs.push(Observation::new(0.0, 1.0)).unwrap();
+        obs.push(Measurement::new(0.0, 1.0)).unwrap();
         let id = Pose2::IDENTITY;
         assert_eq!(
             sparse_icp(p, &obs, &id, &IcpParams::default()),
             Err(RegistrationError::TooFewObservations)
         );
-        obs.push(Observation::new(1.0, 1.0)).unwrap();
+        obs.push(Measurement::new(1.0, 1.0)).unwrap();
         let nan = Pose2 {
             x: f32::NAN,
             y: 0.0,
@@ -1115,7 +1115,7 @@ mod tests {
             sparse_icp(p, &obs, &id, &bad),
             Err(RegistrationError::InvalidParams)
         );
-        let many = [Observation::new(0.0, 1.0); MAX_OBSERVATIONS + 1];
+        let many = [Measurement::new(0.0, 1.0); MAX_OBSERVATIONS + 1];
         assert_eq!(
             Observations::from_slice(&many).err(),
             Some(RegistrationError::TooManyObservations)

@@ -1,0 +1,155 @@
+//! Episode bookkeeping shared by the host runner and the firmware session (§3.1, §4.2).
+//!
+//! An episode is a sequence of discrete actions (rotate-left, rotate-right, measure), each
+//! with a cost, until the coarse localization succeeds or the action limit is reached.
+//! [`EpisodeState`] tracks what the *instrument* knows: its encoder bearing (an integer
+//! number of rotation steps), the counts and the accumulated cost. It does not know the
+//! ground truth. Both sides use it, so host and device agree on every bearing bit for bit.
+
+use crate::agents::{Action, ActionCosts};
+use crate::math::{wrap_angle, TAU};
+use serde::{Deserialize, Serialize};
+
+/// Pixels in one topological scan (§4.1).
+pub const SCAN_PIXELS: usize = 20;
+/// Field of view of one topological scan (§4.1): 45°.
+pub const SCAN_FOV: f32 = core::f32::consts::FRAC_PI_4;
+/// Default rotation steps per full turn (rotation step 2π/54, §4.2 / Table 3).
+pub const DEFAULT_STEPS_PER_TURN: u16 = 54;
+/// Action limit used for evaluation (Table 4).
+pub const EVAL_MAX_ACTIONS: u16 = 100;
+/// Action limit used for training (§4.2).
+pub const TRAIN_MAX_ACTIONS: u16 = 500;
+
+/// What the instrument reports after one action.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Observation {
+    /// Range (m) for a measurement action that returned; `None` for a rotation or a
+    /// measurement without return (beyond maximum range or incidence).
+    pub range: Option<f32>,
+    /// Topological scan at the bearing *after* the action: bit `i` is pixel `i`
+    /// (pixel 0 at the clockwise edge of the field of view).
+    pub scan: u32,
+}
+
+impl Observation {
+    /// Packs scan pixels into the bit mask.
+    pub fn pack_scan(pixels: &[bool; SCAN_PIXELS]) -> u32 {
+        pixels
+            .iter()
+            .enumerate()
+            .fold(0u32, |m, (i, &p)| if p { m | (1 << i) } else { m })
+    }
+}
+
+/// Fixed parameters of one episode.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeConfig {
+    /// Rotation steps per full turn (rotation step = 2π / this).
+    pub steps_per_turn: u16,
+    /// Episode ends after this many actions at the latest.
+    pub max_actions: u16,
+    /// Per-action costs.
+    pub costs: ActionCosts,
+}
+
+impl Default for EpisodeConfig {
+    fn default() -> Self {
+        EpisodeConfig {
+            steps_per_turn: DEFAULT_STEPS_PER_TURN,
+            max_actions: EVAL_MAX_ACTIONS,
+            costs: ActionCosts::default(),
+        }
+    }
+}
+
+impl EpisodeConfig {
+    /// Rotation step in radians.
+    pub fn rot_step(&self) -> f32 {
+        TAU / self.steps_per_turn.max(1) as f32
+    }
+}
+
+/// The instrument-side state of a running episode.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeState {
+    /// The configuration the episode runs under.
+    pub config: EpisodeConfig,
+    /// Encoder position in rotation steps, kept in `[0, steps_per_turn)`.
+    pub bearing_index: u16,
+    /// Actions taken so far.
+    pub actions: u16,
+    /// Measurement actions taken.
+    pub measurements: u16,
+    /// Rotation actions taken.
+    pub rotations: u16,
+    /// Sum of action costs.
+    pub cost: f32,
+}
+
+impl EpisodeState {
+    /// A new episode at encoder bearing 0.
+    pub fn new(config: EpisodeConfig) -> Self {
+        EpisodeState {
+            config,
+            bearing_index: 0,
+            actions: 0,
+            measurements: 0,
+            rotations: 0,
+            cost: 0.0,
+        }
+    }
+
+    /// The current encoder bearing in the scene frame, in [-π, π). Computed from the
+    /// integer index so it never accumulates rounding error.
+    pub fn bearing(&self) -> f32 {
+        wrap_angle(self.bearing_index as f32 * self.config.rot_step())
+    }
+
+    /// True once the action limit is reached.
+    pub fn exhausted(&self) -> bool {
+        self.actions >= self.config.max_actions
+    }
+
+    /// Books one action: counts, cost, and the new encoder bearing.
+    pub fn apply(&mut self, action: Action) {
+        let n = self.config.steps_per_turn.max(1) as i32;
+        self.bearing_index =
+            (self.bearing_index as i32 + action.bearing_delta()).rem_euclid(n) as u16;
+        self.actions = self.actions.saturating_add(1);
+        match action {
+            Action::Measure => self.measurements += 1,
+            _ => self.rotations += 1,
+        }
+        self.cost += self.config.costs.of(action);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bearing_wraps_and_counts() {
+        let mut s = EpisodeState::new(EpisodeConfig::default());
+        s.apply(Action::RotateRight);
+        assert_eq!(s.bearing_index, 53);
+        assert!((s.bearing() + TAU / 54.0).abs() < 1e-6);
+        for _ in 0..56 {
+            s.apply(Action::RotateLeft);
+        }
+        assert_eq!(s.bearing_index, 1);
+        s.apply(Action::Measure);
+        assert_eq!((s.actions, s.rotations, s.measurements), (58, 57, 1));
+        assert!((s.cost - (57.0 * 0.005 + 0.05)).abs() < 1e-4);
+        assert!(!s.exhausted());
+    }
+
+    #[test]
+    fn scan_packing() {
+        let mut p = [false; SCAN_PIXELS];
+        p[0] = true;
+        p[19] = true;
+        assert_eq!(Observation::pack_scan(&p), 1 | (1 << 19));
+    }
+}
