@@ -17,6 +17,9 @@
 //! | [`agents`] | 3.1, 4.2 (actions, costs, the Table-3 baseline agents) |
 //! | [`localization`] | 3.2 (fixed-grid GHT localization: R-table, Algorithms 1–2, belief analysis, staging) |
 //! | [`episode`] | 3.1, 4.2 (episode bookkeeping: encoder bearing, costs, action limit) |
+//! | [`registration`] | 3.3 (Sparse ICP, Algorithm 4, equation 6; annealed perturbation, Algorithm 3) |
+//! | [`symmetry`] | 3.4 (edge-chain rotational-symmetry detection, Wolter et al. 1985) |
+//! | [`pose_distance`] | 3.4 (symmetry-aware pose distance, Table 2, equations 7–10) |
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -27,6 +30,9 @@ pub mod floorplan;
 pub mod geometry;
 pub mod localization;
 pub mod math;
+pub mod pose_distance;
+pub mod registration;
+pub mod symmetry;
 
 pub use floorplan::{FloorPlan, PlanError, RayHit, MAX_VERTICES};
 pub use geometry::{Pose2, Vec2};
