@@ -216,6 +216,16 @@ pub struct IcpParams {
     pub rotation_tolerance: f32,
     /// Keep the initial heading and solve the translation only (orientation known, K = 1).
     pub fixed_heading: bool,
+    /// Cap `c` (m) of the truncated-quadratic candidate score ([`ErrorSummary::score`]).
+    pub score_cap: f32,
+    /// Trust region: the result stays within this distance (m) of the initial position.
+    /// The coarse localizer bounds the true pose to about one grid cell, so refinement has
+    /// no business leaving that neighbourhood; with few measurements, poses far away can
+    /// fit them as well. `f32::INFINITY` disables it.
+    pub trust_translation: f32,
+    /// Trust region on the heading (rad) around the initial heading; `f32::INFINITY`
+    /// disables it.
+    pub trust_rotation: f32,
 }
 
 impl Default for IcpParams {
@@ -230,6 +240,9 @@ impl Default for IcpParams {
             translation_tolerance: 1e-5,
             rotation_tolerance: 1e-6,
             fixed_heading: false,
+            score_cap: 0.2,
+            trust_translation: f32::INFINITY,
+            trust_rotation: f32::INFINITY,
         }
     }
 }
@@ -245,7 +258,11 @@ impl IcpParams {
             && self.reject_min_distance >= 0.0
             && self.reject_min_distance.is_finite()
             && self.translation_tolerance >= 0.0
-            && self.rotation_tolerance >= 0.0;
+            && self.rotation_tolerance >= 0.0
+            && self.score_cap.is_finite()
+            && self.score_cap > 0.0
+            && self.trust_translation > 0.0
+            && self.trust_rotation > 0.0;
         if ok {
             Ok(())
         } else {
@@ -332,6 +349,13 @@ pub struct ErrorSummary {
     pub inliers: u16,
     /// Pairs with relaxed (constraint-free) correspondences.
     pub relaxed: u16,
+    /// Truncated-quadratic cost over *all* pairs (m): `sqrt(Σ w·min(d², c²) / Σ w)` with
+    /// `c` = [`IcpParams::score_cap`]. Candidates are compared by this, not by `error`:
+    /// the inlier RMS alone can be driven to zero with few measurements by poses that push
+    /// a correct measurement into the rejected percentile, whereas here a rejected pair
+    /// still costs `c²` (and a true outlier costs `c²` whatever the pose, so it does not
+    /// bias the choice).
+    pub score: f32,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -444,9 +468,16 @@ fn match_pairs(
     let threshold = if keep == 0 { 0.0 } else { sorted[keep - 1] };
     let (mut sw, mut swd2) = (0.0f32, 0.0f32);
     let (mut inliers, mut relaxed) = (0u16, 0u16);
+    let (mut all_w, mut all_cost) = (0.0f32, 0.0f32);
+    let cap2 = params.score_cap * params.score_cap;
     for p in pairs.iter_mut() {
         p.inlier = p.weight > 0.0 && (p.dist <= threshold || p.dist <= params.reject_min_distance);
         relaxed += p.relaxed as u16;
+        // Relaxed pairs carry a reduced weight in the solve, but in the score every
+        // measurement counts fully: a pose that explains a reading only by a relaxed match
+        // should not look better for it.
+        all_w += 1.0;
+        all_cost += (p.dist * p.dist).min(cap2);
         if p.inlier {
             inliers += 1;
             sw += p.weight;
@@ -458,10 +489,16 @@ fn match_pairs(
     } else {
         f32::INFINITY
     };
+    let score = if all_w > 0.0 {
+        sqrt(all_cost / all_w)
+    } else {
+        f32::INFINITY
+    };
     ErrorSummary {
         error,
         inliers,
         relaxed,
+        score,
     }
 }
 
@@ -536,13 +573,20 @@ pub fn sparse_icp(
 ) -> Result<Registration, RegistrationError> {
     check_inputs(obs, initial, params)?;
     let mut pairs = Pairs::new();
-    Ok(icp_inner(plan, obs, initial, params, &mut pairs))
+    Ok(icp_inner(plan, obs, initial, initial, params, &mut pairs))
+}
+
+/// True when `p` lies in the trust region of `params` around `centre`.
+fn in_trust_region(p: &Pose2, centre: &Pose2, params: &IcpParams) -> bool {
+    length(p.translation() - centre.translation()) <= params.trust_translation
+        && abs(wrap_angle(p.theta - centre.theta)) <= params.trust_rotation
 }
 
 fn icp_inner(
     plan: &FloorPlan,
     obs: &Observations,
     initial: &Pose2,
+    centre: &Pose2,
     params: &IcpParams,
     pairs: &mut Pairs,
 ) -> Registration {
@@ -569,7 +613,7 @@ fn icp_inner(
         let dth = abs(wrap_angle(next.theta - pose.theta));
         pose = next;
         summary = match_pairs(plan, obs, &pose, params, pairs);
-        if summary.error <= best.1.error {
+        if summary.error <= best.1.error && in_trust_region(&pose, centre, params) {
             best = (pose, summary);
         }
         if dt < params.translation_tolerance && dth < params.rotation_tolerance {
@@ -587,6 +631,41 @@ fn icp_inner(
         rounds: 0,
         converged,
     }
+}
+
+/// Annealed registration started from `starts` headings spread evenly over
+/// `initial.theta ± heading_span` (the initial heading itself included when `starts` is odd),
+/// keeping the result with the lowest [`ErrorSummary::score`]. With the heading unknown, the
+/// coarse localizer's heading can be off by more than a rotation bin (36° for K = 10), which
+/// local perturbations rarely bridge with a handful of measurements; a deterministic sweep
+/// does. `starts ≤ 1` or a fixed heading is plain [`register`]. Each start uses the same seed,
+/// so the result is a pure function of the inputs.
+pub fn register_multistart(
+    plan: &FloorPlan,
+    obs: &Observations,
+    initial: &Pose2,
+    params: &AnnealParams,
+    heading_span: f32,
+    starts: u8,
+) -> Result<Registration, RegistrationError> {
+    if starts <= 1 || params.icp.fixed_heading || !(heading_span > 0.0 && heading_span.is_finite())
+    {
+        return register(plan, obs, initial, params);
+    }
+    let mut best: Option<(Registration, f32)> = None;
+    let mut pairs = Pairs::new();
+    for k in 0..starts {
+        let offset = -heading_span + 2.0 * heading_span * (k as f32 + 0.5) / starts as f32;
+        let start = Pose2::new(initial.x, initial.y, initial.theta + offset);
+        // The trust region stays centred on the coarse estimate, not on the start.
+        let r = register_centred(plan, obs, &start, initial, params)?;
+        let score = match_pairs(plan, obs, &r.pose, &params.icp, &mut pairs).score;
+        if best.as_ref().is_none_or(|(_, s)| score < *s) {
+            best = Some((r, score));
+        }
+    }
+    best.map(|(r, _)| r)
+        .ok_or(RegistrationError::TooFewObservations)
 }
 
 /// Standard-normal samples from a seeded [`Pcg32`] via Box–Muller in f32 (libm), identical
@@ -632,6 +711,17 @@ pub fn register(
     initial: &Pose2,
     params: &AnnealParams,
 ) -> Result<Registration, RegistrationError> {
+    register_centred(plan, obs, initial, initial, params)
+}
+
+/// [`register`] from `initial` with the trust region centred on `centre`.
+fn register_centred(
+    plan: &FloorPlan,
+    obs: &Observations,
+    initial: &Pose2,
+    centre: &Pose2,
+    params: &AnnealParams,
+) -> Result<Registration, RegistrationError> {
     let icp = &params.icp;
     check_inputs(obs, initial, icp)?;
     let gains_ok = [
@@ -660,13 +750,13 @@ pub fn register(
         };
         (st, sr)
     };
-    let (mut sigma_t, mut sigma_r) = sigmas(summary.error);
+    let (mut sigma_t, mut sigma_r) = sigmas(summary.score);
     let mut iterations = 0u16;
     let mut rounds = 0u16;
     let mut stale = 0u8;
     let mut converged = false;
     while rounds < params.max_rounds {
-        if summary.error <= params.min_error || stale >= params.patience {
+        if summary.score <= params.min_error || stale >= params.patience {
             converged = true;
             break;
         }
@@ -679,38 +769,36 @@ pub fn register(
                 pose.y + sigma_t * rng.normal(),
                 pose.theta + sigma_r * rng.normal(),
             );
+            if !in_trust_region(&cand, centre, icp) {
+                continue;
+            }
             let s = match_pairs(plan, obs, &cand, icp, &mut pairs);
-            if s.error < pick.1.error {
+            if s.score < pick.1.score {
                 pick = (cand, s);
             }
         }
-        let refined = icp_inner(plan, obs, &pick.0, icp, &mut pairs);
+        let refined = icp_inner(plan, obs, &pick.0, centre, icp, &mut pairs);
         iterations = iterations.saturating_add(refined.iterations);
-        let next = if refined.error < pick.1.error {
-            (
-                refined.pose,
-                ErrorSummary {
-                    error: refined.error,
-                    inliers: refined.inliers,
-                    relaxed: refined.relaxed,
-                },
-            )
+        // icp_inner only returns a pose inside the region (or its start, which is).
+        let refined_summary = match_pairs(plan, obs, &refined.pose, icp, &mut pairs);
+        let next = if refined_summary.score < pick.1.score {
+            (refined.pose, refined_summary)
         } else {
             pick
         };
         // Improvement test with a small relative margin so float jitter does not reset it.
-        if next.1.error < summary.error * (1.0 - 1e-4) {
+        if next.1.score < summary.score * (1.0 - 1e-4) {
             stale = 0;
         } else {
             stale = stale.saturating_add(1);
         }
-        if next.1.error <= summary.error {
+        if next.1.score <= summary.score {
             pose = next.0;
             summary = next.1;
         }
-        (sigma_t, sigma_r) = sigmas(summary.error);
+        (sigma_t, sigma_r) = sigmas(summary.score);
     }
-    if !converged && (summary.error <= params.min_error || stale >= params.patience) {
+    if !converged && (summary.score <= params.min_error || stale >= params.patience) {
         converged = true;
     }
     Ok(Registration {

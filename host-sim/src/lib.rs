@@ -6,7 +6,9 @@
 //! (`src/main.rs`) is the command-line front end.
 
 pub mod episode;
+pub mod eval;
 pub mod plans;
+pub mod plot;
 pub mod sensor;
 pub mod svg;
 pub mod world;

@@ -33,6 +33,66 @@ enum Command {
     Episode(EpisodeArgs),
     /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
     Dataset(DatasetArgs),
+    /// Evaluate agents on the test plans (the paper's Table 4): writes results.json,
+    /// results.md, timing.json and budget.svg into --out.
+    Eval(EvalArgs),
+}
+
+#[derive(Args)]
+struct EvalArgs {
+    /// Comma-separated agent names, or "all" for the seven Table-3 baselines.
+    #[arg(long, default_value = "all", value_parser = parse_agents)]
+    agents: AgentList,
+    /// Comma-separated rotation settings: 1 (heading known) and/or 10.
+    #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
+    rot_bins: Vec<u8>,
+    /// Number of test plans.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
+    plans: u32,
+    /// First plan seed (the test set is 1000000..1001000).
+    #[arg(long, default_value_t = plans::TEST_SEEDS.start)]
+    first_seed: u32,
+    /// Episode seed (placement and noise also depend on the plan seed).
+    #[arg(long, default_value_t = 0)]
+    episode_seed: u64,
+    /// Action limit per episode.
+    #[arg(long, default_value_t = EVAL_MAX_ACTIONS, value_parser = clap::value_parser!(u16).range(1..))]
+    max_actions: u16,
+    /// When an episode stops: coarse success against the ground truth (the paper), or a
+    /// confident belief (no ground truth), or only the action limit.
+    #[arg(long, value_enum, default_value = "oracle")]
+    termination: activesense_sim::episode::Termination,
+    #[command(flatten)]
+    sensor: SensorArgs,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Do not draw a progress bar.
+    #[arg(long)]
+    no_progress: bool,
+}
+
+#[derive(Clone)]
+struct AgentList(Vec<AgentKind>);
+
+fn parse_agents(s: &str) -> Result<AgentList, String> {
+    if s == "all" {
+        return Ok(AgentList(AgentKind::ALL.to_vec()));
+    }
+    let mut v = Vec::new();
+    for name in s.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+        let a = parse_agent(name)?;
+        if !v.contains(&a) {
+            v.push(a);
+        }
+    }
+    if v.is_empty() {
+        return Err("no agent given".into());
+    }
+    Ok(AgentList(v))
 }
 
 #[derive(Args)]
@@ -132,6 +192,10 @@ struct EpisodeArgs {
     episode_seed: u64,
     #[command(flatten)]
     sensor: SensorArgs,
+    /// When to stop: on coarse success against the ground truth (paper), on a confident
+    /// belief (no ground truth), or only at the action limit.
+    #[arg(long, value_enum, default_value = "oracle")]
+    termination: activesense_sim::episode::Termination,
     /// Write the full trajectory as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -159,6 +223,7 @@ fn main() -> ExitCode {
         Command::Plan(a) => cmd_plan(a),
         Command::Episode(a) => cmd_episode(a),
         Command::Dataset(a) => cmd_dataset(a),
+        Command::Eval(a) => cmd_eval(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -245,6 +310,7 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
             ..Default::default()
         },
         sensor: a.sensor.model()?,
+        termination: a.termination,
     };
     let t = run_episode(&spec);
     println!(
@@ -262,7 +328,7 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         t.truth.theta.to_degrees()
     );
     if !a.quiet {
-        println!("step  action        bearing  range       scan (left..right)    cost");
+        println!("step  action        bearing  range       scan (left..right)    cost   entropy");
         println!(
             "   -  start         {:7.1}°  {:<10}  {}",
             0.0,
@@ -276,13 +342,14 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
                 _ => String::new(),
             };
             println!(
-                "{:4}  {:<12}  {:7.1}°  {:<10}  {}  {:.3}",
+                "{:4}  {:<12}  {:7.1}°  {:<10}  {}  {:.3}  {:.2}",
                 s.step,
                 s.action.name(),
                 s.bearing.to_degrees(),
                 range,
                 scan_string(s.scan),
-                s.cost
+                s.cost,
+                s.entropy
             );
         }
     }
@@ -290,6 +357,36 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         "end: {:?} after {} actions ({} measurements, {} rotations), cost {:.3}",
         t.end, t.summary.actions, t.summary.measurements, t.summary.rotations, t.summary.cost
     );
+    let o = &t.outcome;
+    let fmt_pose = |p: &activesense_core::Pose2| {
+        format!(
+            "({:.3}, {:.3}) heading {:.1}°",
+            p.x,
+            p.y,
+            p.theta.to_degrees()
+        )
+    };
+    println!(
+        "recognised: {} (room symmetry C{})",
+        if o.recognised { "yes" } else { "no" },
+        o.symmetry_order
+    );
+    if let (Some(c), Some(e)) = (o.coarse, o.coarse_error) {
+        println!("coarse estimate:  {}  error {:.3} m", fmt_pose(&c), e);
+    }
+    match (&o.refined, o.pose_error) {
+        (Some(r), Some(e)) => println!(
+            "refined estimate: {}  error {:.4} m (registration rms {:.4} m, {} inliers)",
+            fmt_pose(&r.pose),
+            e,
+            r.error,
+            r.inliers
+        ),
+        _ => println!(
+            "refined estimate: none ({})",
+            o.registration_note.as_deref().unwrap_or("not registered")
+        ),
+    }
     if let Some(path) = &a.json {
         write_file(path, &serde_json::to_string_pretty(&t)?)?;
         println!("wrote {}", path.display());
@@ -305,7 +402,7 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
             placement: Some(t.placement),
             agent: Some(t.truth),
             trajectory: Some(&t),
-            ..Default::default()
+            estimate: o.refined.map(|r| r.pose),
         };
         write_file(path, &svg::render(&t.plan, &scene))?;
         println!("wrote {}", path.display());
@@ -318,8 +415,12 @@ fn cmd_dataset(a: DatasetArgs) -> Result<()> {
         Split::Test => plans::TEST_SEEDS,
         Split::Train => plans::TRAIN_SEEDS,
     };
-    let n = a.plans.unwrap_or(range.end - range.start).min(range.end - range.start);
-    let mut by_shape: std::collections::BTreeMap<String, (u32, usize, usize, f32, f32)> = Default::default();
+    let n = a
+        .plans
+        .unwrap_or(range.end - range.start)
+        .min(range.end - range.start);
+    let mut by_shape: std::collections::BTreeMap<String, (u32, usize, usize, f32, f32)> =
+        Default::default();
     for seed in range.start..range.start + n {
         let g = plans::generate_detailed(seed, None);
         let (lo, hi) = g.plan.bounds();
@@ -341,6 +442,68 @@ fn cmd_dataset(a: DatasetArgs) -> Result<()> {
             "| {k} | {c} | {:.1}% | {vmin}–{vmax} | {smin:.1}–{smax:.1} |",
             100.0 * c as f32 / n as f32
         );
+    }
+    Ok(())
+}
+
+fn cmd_eval(a: EvalArgs) -> Result<()> {
+    use activesense_sim::eval;
+    use std::io::IsTerminal;
+    if let Some(bad) = a.rot_bins.iter().find(|k| **k != 1 && **k != 10) {
+        bail!("--rot-bins takes 1 and/or 10 (the paper's two settings), got {bad}");
+    }
+    let mut rot_bins = a.rot_bins.clone();
+    rot_bins.dedup();
+    if let Some(n) = a.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .context("cannot set the thread count")?;
+    }
+    let opts = eval::EvalOptions {
+        agents: a.agents.0.clone(),
+        rot_bins,
+        plans: a.plans,
+        first_seed: a.first_seed,
+        episode_seed: a.episode_seed,
+        config: EpisodeConfig {
+            max_actions: a.max_actions,
+            ..Default::default()
+        },
+        sensor: a.sensor.model()?,
+        termination: a.termination,
+        progress: !a.no_progress && std::io::stderr().is_terminal(),
+    };
+    let command = std::env::args()
+        .map(|w| w.rsplit('/').next().unwrap_or(&w).to_string())
+        .collect::<Vec<_>>()
+        .join(" ");
+    eprintln!(
+        "evaluating {} agent(s) x {} rotation setting(s) x {} plans = {} episodes",
+        opts.agents.len(),
+        opts.rot_bins.len(),
+        opts.plans,
+        opts.agents.len() * opts.rot_bins.len() * opts.plans as usize
+    );
+    let (report, timing) = eval::run(&opts);
+    let files = eval::write_outputs(&report, &timing, &a.out, &command)?;
+    println!("agent         bins  recognition  pose error (m)  measurements  rotations");
+    for r in &report.results {
+        println!(
+            "{:<12}  {:>4}  {:>11.3}  {:>14}  {:>12.2}  {:>9.2}",
+            r.agent,
+            r.rot_bins,
+            r.recognition_rate,
+            r.pose_error
+                .map(|e| format!("{e:.4}"))
+                .unwrap_or_else(|| "-".into()),
+            r.measurements,
+            r.rotations
+        );
+    }
+    println!("{:.1} s wall time", timing.total_s);
+    for f in files {
+        println!("wrote {}", f.display());
     }
     Ok(())
 }

@@ -1,0 +1,205 @@
+//! The evaluation plot: recognition rate and pose error against the measurement budget,
+//! one line per agent, one row of two panels per rotation setting. Hand-written SVG like
+//! [`crate::svg`]: two line charts do not justify a plotting dependency.
+
+use crate::eval::{EvalReport, MAX_BUDGET};
+use std::fmt::Write;
+
+const COLOURS: [&str; 8] = [
+    "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d", "#666666",
+];
+const PANEL_W: f64 = 420.0;
+const PANEL_H: f64 = 260.0;
+const LEFT: f64 = 70.0;
+const TOP: f64 = 60.0;
+const GAP_X: f64 = 110.0;
+const GAP_Y: f64 = 90.0;
+
+struct Panel {
+    x0: f64,
+    y0: f64,
+    ymax: f64,
+}
+
+impl Panel {
+    fn px(&self, budget: f64, y: f64) -> (f64, f64) {
+        let x = self.x0 + (budget - 1.0) / (MAX_BUDGET as f64 - 1.0) * PANEL_W;
+        let y = self.y0 + PANEL_H - (y / self.ymax).clamp(0.0, 1.0) * PANEL_H;
+        (x, y)
+    }
+}
+
+fn axes(
+    s: &mut String,
+    p: &Panel,
+    title: &str,
+    ylabel: &str,
+    yticks: &[f64],
+    fmt: &dyn Fn(f64) -> String,
+) {
+    let _ = writeln!(
+        s,
+        r##"<rect x="{:.1}" y="{:.1}" width="{PANEL_W}" height="{PANEL_H}" fill="none" stroke="#444"/>"##,
+        p.x0, p.y0
+    );
+    let _ = writeln!(
+        s,
+        r#"<text x="{:.1}" y="{:.1}" font-weight="bold" text-anchor="middle">{title}</text>"#,
+        p.x0 + PANEL_W / 2.0,
+        p.y0 - 10.0
+    );
+    for &t in yticks {
+        let (_, y) = p.px(1.0, t);
+        let _ = writeln!(
+            s,
+            r##"<line x1="{:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end" font-size="11">{}</text>"##,
+            p.x0,
+            p.x0 + PANEL_W,
+            p.x0 - 6.0,
+            y + 4.0,
+            fmt(t)
+        );
+    }
+    for b in (0..=MAX_BUDGET).step_by(5).skip(1).chain([1]) {
+        let (x, y) = p.px(b as f64, 0.0);
+        let _ = writeln!(
+            s,
+            r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle" font-size="11">{b}</text>"#,
+            y + 16.0
+        );
+    }
+    let _ = writeln!(
+        s,
+        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="12">measurement budget</text>"#,
+        p.x0 + PANEL_W / 2.0,
+        p.y0 + PANEL_H + 34.0
+    );
+    let _ = writeln!(
+        s,
+        r#"<text transform="translate({:.1},{:.1}) rotate(-90)" text-anchor="middle" font-size="12">{ylabel}</text>"#,
+        p.x0 - 48.0,
+        p.y0 + PANEL_H / 2.0
+    );
+}
+
+/// Renders the budget plot for every rotation setting in the report.
+pub fn budget_svg(report: &EvalReport) -> String {
+    let settings = &report.options.rot_bins;
+    let agents: Vec<String> = report
+        .options
+        .agents
+        .iter()
+        .map(|a| a.name().to_string())
+        .collect();
+    let width = LEFT + 2.0 * PANEL_W + GAP_X + 170.0;
+    let height = TOP + settings.len() as f64 * (PANEL_H + GAP_Y) + 20.0;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
+    );
+    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
+    let _ = writeln!(
+        s,
+        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">Recognition and pose error within a measurement budget ({} plans)</text>"#,
+        report.options.plans
+    );
+    // Shared pose-error scale: the largest plotted mean, rounded up to a nice value.
+    let emax = report
+        .results
+        .iter()
+        .flat_map(|r| r.pose_error_by_budget.iter().flatten().copied())
+        .fold(0.0f64, f64::max);
+    let emax = [0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0]
+        .into_iter()
+        .find(|v| *v >= emax)
+        .unwrap_or(10.0);
+    for (row, &k) in settings.iter().enumerate() {
+        let y0 = TOP + 20.0 + row as f64 * (PANEL_H + GAP_Y);
+        let rec = Panel {
+            x0: LEFT,
+            y0,
+            ymax: 1.0,
+        };
+        let err = Panel {
+            x0: LEFT + PANEL_W + GAP_X,
+            y0,
+            ymax: emax,
+        };
+        let tag = if k == 1 {
+            "1 rotation bin".to_string()
+        } else {
+            format!("{k} rotation bins")
+        };
+        axes(
+            &mut s,
+            &rec,
+            &format!("recognition rate — {tag}"),
+            "recognised within budget",
+            &[0.0, 0.25, 0.5, 0.75, 1.0],
+            &|v| format!("{v:.2}"),
+        );
+        axes(
+            &mut s,
+            &err,
+            &format!("pose error — {tag}"),
+            "mean pose error of recognised (m)",
+            &[0.0, emax / 4.0, emax / 2.0, 3.0 * emax / 4.0, emax],
+            &|v| format!("{v:.3}"),
+        );
+        for (ai, name) in agents.iter().enumerate() {
+            let Some(r) = report
+                .results
+                .iter()
+                .find(|r| &r.agent == name && r.rot_bins == k)
+            else {
+                continue;
+            };
+            let c = COLOURS[ai % COLOURS.len()];
+            let pts: Vec<String> = r
+                .recognition_by_budget
+                .iter()
+                .enumerate()
+                .map(|(i, v)| {
+                    let (x, y) = rec.px(i as f64 + 1.0, *v);
+                    format!("{x:.1},{y:.1}")
+                })
+                .collect();
+            let _ = writeln!(
+                s,
+                r#"<polyline points="{}" fill="none" stroke="{c}" stroke-width="2"/>"#,
+                pts.join(" ")
+            );
+            // Pose-error line: only where some episode was recognised within the budget.
+            let mut seg: Vec<String> = Vec::new();
+            for (i, v) in r.pose_error_by_budget.iter().enumerate() {
+                if let Some(v) = v {
+                    let (x, y) = err.px(i as f64 + 1.0, *v);
+                    seg.push(format!("{x:.1},{y:.1}"));
+                }
+            }
+            if !seg.is_empty() {
+                let _ = writeln!(
+                    s,
+                    r#"<polyline points="{}" fill="none" stroke="{c}" stroke-width="2"/>"#,
+                    seg.join(" ")
+                );
+            }
+        }
+    }
+    // Legend.
+    let lx = LEFT + 2.0 * PANEL_W + GAP_X + 20.0;
+    for (ai, name) in agents.iter().enumerate() {
+        let y = TOP + 30.0 + ai as f64 * 20.0;
+        let c = COLOURS[ai % COLOURS.len()];
+        let _ = writeln!(
+            s,
+            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{c}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{name}</text>"#,
+            lx + 24.0,
+            lx + 30.0,
+            y + 4.0
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
