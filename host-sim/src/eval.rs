@@ -14,10 +14,11 @@
 //!   (within one translation cell and one rotation bin of the truth or a symmetric
 //!   equivalent) by the end of the episode;
 //! - *pose error*: symmetry-aware pose distance (Brégier et al.) between the refined
-//!   registration and the truth, in metres, averaged over **all** episodes that registered
-//!   (the paper's Table 4 reports one number per agent and its trend with recognition shows
-//!   failed episodes are included); the mean over recognised episodes and the median are
-//!   reported beside it;
+//!   registration and the truth, in metres, averaged over the **recognised** episodes. The
+//!   paper does not say; its numbers only fit this reading (heuristic-1 with 10 bins: 0.94
+//!   recognition and 0.092 m mean error, whereas an unrecognised episode registers metres
+//!   away). The mean over all registered episodes (`pose_error_all`) and the median over
+//!   recognised ones are reported beside it;
 //! - *measurements / rotations*: mean counts per episode, including failed episodes that
 //!   ran to the action limit.
 
@@ -165,14 +166,14 @@ pub struct GroupResult {
     pub recognition_rate: f64,
     /// Wilson 95 % interval of the recognition rate.
     pub recognition_ci95: [f64; 2],
-    /// Mean refined pose error over all registered episodes (m).
+    /// Mean refined pose error over recognised episodes (m).
     pub pose_error: Option<f64>,
     /// 95 % interval of the mean pose error.
     pub pose_error_ci95: Option<[f64; 2]>,
-    /// Median refined pose error (m).
+    /// Median refined pose error over recognised episodes (m).
     pub pose_error_median: Option<f64>,
-    /// Mean refined pose error over recognised episodes (m).
-    pub pose_error_recognised: Option<f64>,
+    /// Mean refined pose error over all registered episodes, recognised or not (m).
+    pub pose_error_all: Option<f64>,
     /// Mean coarse (pre-ICP) pose error over all episodes with a belief (m).
     pub coarse_error: Option<f64>,
     /// Mean measurements per episode.
@@ -229,7 +230,7 @@ fn aggregate(agent: AgentKind, rot_bins: u8, rows: Vec<EpisodeRow>) -> GroupResu
         lo: 0.0,
         hi: 0.0,
     });
-    let pe_ci = MeanCi::of(&pe);
+    let pe_ci = MeanCi::of(&pe_rec);
     let mut budget_rec = Vec::with_capacity(MAX_BUDGET);
     let mut budget_err = Vec::with_capacity(MAX_BUDGET);
     for b in 1..=MAX_BUDGET {
@@ -252,8 +253,8 @@ fn aggregate(agent: AgentKind, rot_bins: u8, rows: Vec<EpisodeRow>) -> GroupResu
         recognition_ci95: [lo, hi],
         pose_error: pe_ci.map(|c| c.mean),
         pose_error_ci95: pe_ci.map(|c| [c.lo, c.hi]),
-        pose_error_median: median(&mut pe.clone()),
-        pose_error_recognised: MeanCi::of(&pe_rec).map(|c| c.mean),
+        pose_error_median: median(&mut pe_rec.clone()),
+        pose_error_all: MeanCi::of(&pe).map(|c| c.mean),
         coarse_error: MeanCi::of(&ce).map(|c| c.mean),
         measurements: m.mean,
         measurements_ci95: [m.lo, m.hi],
@@ -432,7 +433,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         );
         let _ = writeln!(
             s,
-            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, recognised (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | episode time (s) |"
+            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | episode time (s) |"
         );
         let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
         for (g, r) in report
@@ -452,7 +453,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
                 opt(r.pose_error_ci95.map(|c| c[0]), 4),
                 opt(r.pose_error_ci95.map(|c| c[1]), 4),
                 opt(r.pose_error_median, 4),
-                opt(r.pose_error_recognised, 4),
+                opt(r.pose_error_all, 4),
                 opt(r.coarse_error, 3),
                 r.measurements,
                 r.measurements_ci95[0],

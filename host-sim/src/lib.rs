@@ -5,6 +5,7 @@
 //! trajectory log ([`episode`]) and SVG rendering ([`svg`]). The `activesense` binary
 //! (`src/main.rs`) is the command-line front end.
 
+pub mod bench_registration;
 pub mod episode;
 pub mod eval;
 pub mod plans;

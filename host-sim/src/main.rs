@@ -36,6 +36,29 @@ enum Command {
     /// Evaluate agents on the test plans (the paper's Table 4): writes results.json,
     /// results.md, timing.json and budget.svg into --out.
     Eval(EvalArgs),
+    /// Measure sparse-registration accuracy from coarse poses on the test plans.
+    BenchRegistration(BenchRegistrationArgs),
+}
+
+#[derive(Args)]
+struct BenchRegistrationArgs {
+    /// Number of test plans.
+    #[arg(long, default_value_t = 1000)]
+    plans: usize,
+    /// Measurements per trial.
+    #[arg(long, default_value_t = 6)]
+    measurements: usize,
+    /// Grid cells across the larger room side (coarse position error within one cell).
+    #[arg(long, default_value_t = 30.0)]
+    cells: f32,
+    /// Seed of the measurement and coarse-pose stream.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    #[command(flatten)]
+    sensor: SensorArgs,
+    /// Write the full report (statistics and every trial) as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -224,6 +247,7 @@ fn main() -> ExitCode {
         Command::Episode(a) => cmd_episode(a),
         Command::Dataset(a) => cmd_dataset(a),
         Command::Eval(a) => cmd_eval(a),
+        Command::BenchRegistration(a) => cmd_bench_registration(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -232,6 +256,25 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+fn cmd_bench_registration(a: BenchRegistrationArgs) -> Result<()> {
+    use activesense_sim::bench_registration as bench;
+    let opts = bench::BenchOptions {
+        plans: a.plans,
+        measurements: a.measurements,
+        cells: a.cells,
+        sensor: a.sensor.model()?,
+        seed: a.seed,
+        ..Default::default()
+    };
+    let report = bench::run(&opts)?;
+    print!("{}", bench::summary(&report));
+    if let Some(path) = &a.json {
+        write_file(path, &serde_json::to_string_pretty(&report)?)?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
 }
 
 fn write_file(path: &Path, contents: &str) -> Result<()> {
