@@ -33,6 +33,27 @@ enum Command {
     Episode(EpisodeArgs),
     /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
     Dataset(DatasetArgs),
+    /// Benchmark the GHT localizer against the classical grid localizer (cost, memory, recognition).
+    BenchLocalization(BenchLocalizationArgs),
+}
+
+#[derive(Args)]
+struct BenchLocalizationArgs {
+    /// Number of test plans (seeds from 1000000 on).
+    #[arg(long, default_value_t = 20)]
+    plans: usize,
+    /// Agent placements per plan and outlier rate.
+    #[arg(long, default_value_t = 3)]
+    trials: usize,
+    /// Rotation bins (1 = orientation known, 10 = paper default).
+    #[arg(long, default_value_t = 10)]
+    rot_bins: u8,
+    /// Rotation hypotheses per bin.
+    #[arg(long, default_value_t = 4)]
+    sub_bins: u8,
+    /// Write the report as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -159,6 +180,7 @@ fn main() -> ExitCode {
         Command::Plan(a) => cmd_plan(a),
         Command::Episode(a) => cmd_episode(a),
         Command::Dataset(a) => cmd_dataset(a),
+        Command::BenchLocalization(a) => cmd_bench_localization(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -318,8 +340,12 @@ fn cmd_dataset(a: DatasetArgs) -> Result<()> {
         Split::Test => plans::TEST_SEEDS,
         Split::Train => plans::TRAIN_SEEDS,
     };
-    let n = a.plans.unwrap_or(range.end - range.start).min(range.end - range.start);
-    let mut by_shape: std::collections::BTreeMap<String, (u32, usize, usize, f32, f32)> = Default::default();
+    let n = a
+        .plans
+        .unwrap_or(range.end - range.start)
+        .min(range.end - range.start);
+    let mut by_shape: std::collections::BTreeMap<String, (u32, usize, usize, f32, f32)> =
+        Default::default();
     for seed in range.start..range.start + n {
         let g = plans::generate_detailed(seed, None);
         let (lo, hi) = g.plan.bounds();
@@ -341,6 +367,27 @@ fn cmd_dataset(a: DatasetArgs) -> Result<()> {
             "| {k} | {c} | {:.1}% | {vmin}–{vmax} | {smin:.1}–{smax:.1} |",
             100.0 * c as f32 / n as f32
         );
+    }
+    Ok(())
+}
+
+fn cmd_bench_localization(a: BenchLocalizationArgs) -> Result<()> {
+    use activesense_sim::bench_localization::{self as bl, BenchOptions};
+    let mut opts = BenchOptions {
+        plans: a.plans,
+        trials_per_plan: a.trials,
+        ..BenchOptions::default()
+    };
+    opts.config.rot_bins = a.rot_bins;
+    opts.config.sub_bins = a.sub_bins;
+    if a.rot_bins == 1 {
+        opts.smear_sub_bins.clear();
+    }
+    let report = bl::run(&opts)?;
+    print!("{}", bl::markdown(&report));
+    if let Some(path) = a.json {
+        std::fs::write(&path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
 }
