@@ -475,3 +475,48 @@ pub fn markdown(r: &Report) -> String {
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn small_run_reports_every_field() {
+        let opts = BenchOptions {
+            plans: 1,
+            trials_per_plan: 1,
+            outlier_rates: vec![0.3],
+            ks: vec![12],
+            smear_sub_bins: vec![1],
+            ..BenchOptions::default()
+        };
+        let r = run(&opts).unwrap();
+        assert!(r.ght_state_bytes <= 48 * 1024);
+        assert!(r.speedup_total_10 > 1.0 && r.speedup_total_10.is_finite());
+        assert!(r.recognition_ght_30pct.is_finite() && r.recognition_classical_30pct.is_finite());
+        assert_eq!(r.smear.len(), 1);
+        let json = serde_json::to_string(&r).unwrap();
+        assert!(json.contains("\"speedup_total_10\"") && json.contains("\"ght_update_us\""));
+        assert!(markdown(&r).contains("up-front + 10 updates"));
+    }
+
+    #[test]
+    fn cyclic_order_of_simple_shapes() {
+        let sq = FloorPlan::new(&[
+            activesense_core::geometry::v2(-2.0, -2.0),
+            activesense_core::geometry::v2(2.0, -2.0),
+            activesense_core::geometry::v2(2.0, 2.0),
+            activesense_core::geometry::v2(-2.0, 2.0),
+        ])
+        .unwrap();
+        assert_eq!(cyclic_order(&sq), 4);
+        let rect = FloorPlan::new(&[
+            activesense_core::geometry::v2(-3.0, -2.0),
+            activesense_core::geometry::v2(3.0, -2.0),
+            activesense_core::geometry::v2(3.0, 2.0),
+            activesense_core::geometry::v2(-3.0, 2.0),
+        ])
+        .unwrap();
+        assert_eq!(cyclic_order(&rect), 2);
+    }
+}

@@ -23,7 +23,7 @@
 //!   h + 2πk/n)` equivalent; [`GridSpec::coarse_success`] takes `symmetry_order: u8`.
 //!
 //! ## Memory (the MCU has 128 KiB of RAM)
-//! [`GhtLocalizer`] is one fixed-size value, `size_of::<GhtLocalizer>()` = 46 908 bytes
+//! [`GhtLocalizer`] is one fixed-size value, `size_of::<GhtLocalizer>()` = 46 724 bytes
 //! (≤ 48 KiB) at capacity 30 × 30 × 10 with a 384-point R-table: belief 36 000 B (f32),
 //! one-layer scratch 3 600 B (shared by the commit and the staging path), R-table 6 144 B,
 //! interior mask 900 B. Build it with the `const fn` [`GhtLocalizer::new_empty`] (e.g. in a
