@@ -23,7 +23,7 @@
 //!   h + 2πk/n)` equivalent; [`GridSpec::coarse_success`] takes `symmetry_order: u8`.
 //!
 //! ## Memory (the MCU has 128 KiB of RAM)
-//! [`GhtLocalizer`] is one fixed-size value, `size_of::<GhtLocalizer>()` = 46 908 bytes
+//! [`GhtLocalizer`] is one fixed-size value, `size_of::<GhtLocalizer>()` = 46 724 bytes
 //! (≤ 48 KiB) at capacity 30 × 30 × 10 with a 384-point R-table: belief 36 000 B (f32),
 //! one-layer scratch 3 600 B (shared by the commit and the staging path), R-table 6 144 B,
 //! interior mask 900 B. Build it with the `const fn` [`GhtLocalizer::new_empty`] (e.g. in a
@@ -139,7 +139,8 @@ pub struct LocalizerConfig {
     /// a plan that then needs too many points is [`LocError::PlanTooLarge`].
     pub perimeter_spacing: f32,
     /// Algorithm 1 incidence precondition: the angle between the ray and the hypothesised
-    /// wall's outward normal must not exceed this (rad, default 75°).
+    /// wall's outward normal must not exceed this (rad, default 80°: the simulated EDM returns up to 75°, plus slack for the
+    /// rotation-hypothesis spacing).
     pub max_incidence: f32,
     /// Range noise σ of the sensor (m, default 0.02); the vote kernel along the ray.
     pub range_sigma: f32,
@@ -155,7 +156,7 @@ pub struct LocalizerConfig {
 }
 
 impl LocalizerConfig {
-    /// The defaults listed field by field (30 × 30 × 10, 4 sub-bins, auto spacing, 75°,
+    /// The defaults listed field by field (30 × 30 × 10, 4 sub-bins, auto spacing, 80°,
     /// 2 cm, 3 × 3, λ = ln 10).
     pub const DEFAULT: LocalizerConfig = LocalizerConfig {
         nx: 30,
@@ -164,7 +165,7 @@ impl LocalizerConfig {
         known_heading: 0.0,
         sub_bins: 4,
         perimeter_spacing: 0.0,
-        max_incidence: 75.0 * core::f32::consts::PI / 180.0,
+        max_incidence: 80.0 * core::f32::consts::PI / 180.0,
         range_sigma: 0.02,
         spread: 1,
         evidence_gain: core::f32::consts::LN_10,
