@@ -114,7 +114,8 @@ impl EpisodeState {
     /// Books one action: counts, cost, and the new encoder bearing.
     pub fn apply(&mut self, action: Action) {
         let n = self.config.steps_per_turn.max(1) as i32;
-        self.bearing_index = (self.bearing_index as i32 + action.bearing_delta()).rem_euclid(n) as u16;
+        self.bearing_index =
+            (self.bearing_index as i32 + action.bearing_delta()).rem_euclid(n) as u16;
         self.actions = self.actions.saturating_add(1);
         match action {
             Action::Measure => self.measurements += 1,

@@ -16,6 +16,9 @@
 //! | [`floorplan`] | 3, 4.1 (the polygonal floor-plan model, ray casting, topological scan) |
 //! | [`agents`] | 3.1, 4.2 (actions, costs, the Table-3 baseline agents) |
 //! | [`episode`] | 3.1, 4.2 (episode bookkeeping: encoder bearing, costs, action limit) |
+//! | [`wire`] | host ⇄ instrument serial protocol (`docs/protocol.md`) |
+//! | [`session`] | the device's protocol state machine and episode controller |
+//! | [`instrument`] | sensors/actuators trait, embedded-hal hardware instrument |
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -24,7 +27,10 @@ pub mod agents;
 pub mod episode;
 pub mod floorplan;
 pub mod geometry;
+pub mod instrument;
 pub mod math;
+pub mod session;
+pub mod wire;
 
 pub use floorplan::{FloorPlan, PlanError, RayHit, MAX_VERTICES};
 pub use geometry::{Pose2, Vec2};
