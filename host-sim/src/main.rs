@@ -1,1 +1,293 @@
-fn main() {}
+//! `activesense` — the command-line front end of the simulator, evaluation harness and
+//! instrument driver. Run `activesense --help` for the list of commands.
+
+use activesense_core::agents::AgentKind;
+use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
+use activesense_sim::episode::{run_episode, scan_string, EpisodeSpec};
+use activesense_sim::plans::{self, Family};
+use activesense_sim::sensor::SensorModel;
+use activesense_sim::svg::{self, Scene};
+use activesense_sim::world::placement;
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// Register a known floor-plan against a room with as few EDM measurements as possible.
+///
+/// activesense is the reference implementation of "Learning Effective Sparse Sampling
+/// Strategies using Deep Active Sensing". This tool generates floor-plans, runs simulated
+/// sampling episodes, evaluates agents and drives a real or emulated instrument.
+#[derive(Parser)]
+#[command(name = "activesense", version, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Generate one floor-plan from its seed and draw it (outline, visual centre, agent disc, agent).
+    Plan(PlanArgs),
+    /// Run one simulated episode with a baseline agent and print its step log.
+    Episode(EpisodeArgs),
+}
+
+#[derive(Args)]
+struct PlanArgs {
+    /// Plan seed (u32). Test plans are 1000000..1001000, training plans 0..1000000.
+    #[arg(long)]
+    seed: u32,
+    /// Restrict the generator to one family.
+    #[arg(long, value_enum)]
+    family: Option<Family>,
+    /// Write an SVG picture here.
+    #[arg(long)]
+    svg: Option<PathBuf>,
+    /// Write the plan (vertices, shape, placement) as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Episode seed used to place the drawn agent.
+    #[arg(long, default_value_t = 0)]
+    episode_seed: u64,
+}
+
+/// Sensor options shared by every simulating command.
+#[derive(Args, Clone)]
+struct SensorArgs {
+    /// EDM range noise, standard deviation in metres.
+    #[arg(long, default_value_t = 0.01)]
+    sigma: f32,
+    /// Probability that a measurement is an outlier (uniform random range).
+    #[arg(long, default_value_t = 0.05)]
+    outliers: f32,
+    /// No EDM return beyond this range (m).
+    #[arg(long, default_value_t = 50.0)]
+    max_range: f32,
+    /// No EDM return beyond this incidence angle from the wall normal (degrees).
+    #[arg(long, default_value_t = 75.0)]
+    max_incidence_deg: f32,
+    /// Topological scan false-negative rate per pixel.
+    #[arg(long, default_value_t = 0.0)]
+    scan_fn: f32,
+    /// Topological scan false-positive rate per pixel.
+    #[arg(long, default_value_t = 0.0)]
+    scan_fp: f32,
+}
+
+impl SensorArgs {
+    fn model(&self) -> Result<SensorModel> {
+        let m = SensorModel {
+            sigma: self.sigma,
+            outlier_prob: self.outliers,
+            max_range: self.max_range,
+            max_incidence: self.max_incidence_deg.to_radians(),
+            scan_false_negative: self.scan_fn,
+            scan_false_positive: self.scan_fp,
+        };
+        m.validate().map_err(anyhow::Error::msg)?;
+        Ok(m)
+    }
+}
+
+#[derive(Args)]
+struct EpisodeArgs {
+    /// Plan seed (u32).
+    #[arg(long)]
+    seed: u32,
+    /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3.
+    #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
+    agent: AgentKind,
+    /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=10))]
+    rot_bins: u8,
+    /// Action limit (100 for evaluation, 500 for training).
+    #[arg(long, default_value_t = EVAL_MAX_ACTIONS, value_parser = clap::value_parser!(u16).range(1..))]
+    max_actions: u16,
+    /// Rotation steps per full turn (rotation step = 360° / this).
+    #[arg(long, default_value_t = DEFAULT_STEPS_PER_TURN, value_parser = clap::value_parser!(u16).range(2..=3600))]
+    steps_per_turn: u16,
+    /// Episode seed (placement, noise and agent randomness).
+    #[arg(long, default_value_t = 0)]
+    episode_seed: u64,
+    #[command(flatten)]
+    sensor: SensorArgs,
+    /// Write the full trajectory as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write an SVG of the room, agent and measurement beams here.
+    #[arg(long)]
+    svg: Option<PathBuf>,
+    /// Print only the summary, not every step.
+    #[arg(long)]
+    quiet: bool,
+}
+
+fn parse_agent(s: &str) -> Result<AgentKind, String> {
+    AgentKind::from_name(s).ok_or_else(|| {
+        let names: Vec<_> = AgentKind::ALL.iter().map(|a| a.name()).collect();
+        format!(
+            "unknown agent '{s}' (expected one of: {})",
+            names.join(", ")
+        )
+    })
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Plan(a) => cmd_plan(a),
+        Command::Episode(a) => cmd_episode(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn write_file(path: &Path, contents: &str) -> Result<()> {
+    std::fs::write(path, contents).with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn cmd_plan(a: PlanArgs) -> Result<()> {
+    let g = plans::generate_detailed(a.seed, a.family);
+    let p = placement(&g.plan);
+    let (lo, hi) = g.plan.bounds();
+    println!(
+        "plan {}: {:?} ({:?}), {} vertices, {:.2} m x {:.2} m, perimeter {:.2} m, area {:.2} m²",
+        g.seed,
+        g.shape,
+        g.family,
+        g.plan.len(),
+        hi.x - lo.x,
+        hi.y - lo.y,
+        g.plan.perimeter(),
+        g.plan.signed_area()
+    );
+    println!(
+        "visual centre ({:.3}, {:.3}), placement radius {:.3} m",
+        p.visual_centre[0], p.visual_centre[1], p.radius
+    );
+    let world = activesense_sim::world::SimWorld::new(
+        g.plan.clone(),
+        SensorModel::default(),
+        EpisodeConfig::default(),
+        EpisodeSpec {
+            episode_seed: a.episode_seed,
+            ..EpisodeSpec::new(a.seed, AgentKind::Heuristic1)
+        }
+        .world_seed(),
+    );
+    let truth = world.truth();
+    println!(
+        "agent ({:.3}, {:.3}), heading {:.1}°",
+        truth.x,
+        truth.y,
+        truth.theta.to_degrees()
+    );
+    if let Some(path) = &a.json {
+        let doc = serde_json::json!({ "generated": g, "placement": p, "agent": truth });
+        write_file(path, &serde_json::to_string_pretty(&doc)?)?;
+        println!("wrote {}", path.display());
+    }
+    if let Some(path) = &a.svg {
+        let scene = Scene {
+            title: format!("plan {} — {:?}, {} vertices", g.seed, g.shape, g.plan.len()),
+            placement: Some(p),
+            agent: Some(truth),
+            ..Default::default()
+        };
+        write_file(path, &svg::render(&g.plan, &scene))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn cmd_episode(a: EpisodeArgs) -> Result<()> {
+    if a.rot_bins != 1 && a.rot_bins != 10 {
+        bail!(
+            "--rot-bins must be 1 or 10 (the paper's two settings), got {}",
+            a.rot_bins
+        );
+    }
+    let spec = EpisodeSpec {
+        plan_seed: a.seed,
+        episode_seed: a.episode_seed,
+        agent: a.agent,
+        rot_bins: a.rot_bins,
+        config: EpisodeConfig {
+            steps_per_turn: a.steps_per_turn,
+            max_actions: a.max_actions,
+            ..Default::default()
+        },
+        sensor: a.sensor.model()?,
+    };
+    let t = run_episode(&spec);
+    println!(
+        "episode: plan {} agent {} rot-bins {} max-actions {} episode-seed {}",
+        spec.plan_seed,
+        spec.agent.name(),
+        spec.rot_bins,
+        spec.config.max_actions,
+        spec.episode_seed
+    );
+    println!(
+        "truth: agent ({:.3}, {:.3}) heading {:.1}° (hidden from the agent)",
+        t.truth.x,
+        t.truth.y,
+        t.truth.theta.to_degrees()
+    );
+    if !a.quiet {
+        println!("step  action        bearing  range       scan (left..right)    cost");
+        println!(
+            "   -  start         {:7.1}°  {:<10}  {}",
+            0.0,
+            "",
+            scan_string(t.initial_scan)
+        );
+        for s in &t.steps {
+            let range = match (s.range, s.action) {
+                (Some(r), _) => format!("{r:8.3} m"),
+                (None, activesense_core::agents::Action::Measure) => "no return".into(),
+                _ => String::new(),
+            };
+            println!(
+                "{:4}  {:<12}  {:7.1}°  {:<10}  {}  {:.3}",
+                s.step,
+                s.action.name(),
+                s.bearing.to_degrees(),
+                range,
+                scan_string(s.scan),
+                s.cost
+            );
+        }
+    }
+    println!(
+        "end: {:?} after {} actions ({} measurements, {} rotations), cost {:.3}",
+        t.end, t.summary.actions, t.summary.measurements, t.summary.rotations, t.summary.cost
+    );
+    if let Some(path) = &a.json {
+        write_file(path, &serde_json::to_string_pretty(&t)?)?;
+        println!("wrote {}", path.display());
+    }
+    if let Some(path) = &a.svg {
+        let scene = Scene {
+            title: format!(
+                "plan {} — {} episode, {} measurements",
+                spec.plan_seed,
+                spec.agent.name(),
+                t.summary.measurements
+            ),
+            placement: Some(t.placement),
+            agent: Some(t.truth),
+            trajectory: Some(&t),
+            ..Default::default()
+        };
+        write_file(path, &svg::render(&t.plan, &scene))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}

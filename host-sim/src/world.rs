@@ -1,0 +1,196 @@
+//! The simulated world (paper §3, §4.2): a generated floor-plan, the agent placed about the
+//! room's visual centre, and a simulated instrument that executes actions and answers with
+//! observations.
+//!
+//! Placement: the visual centre is the pole of inaccessibility (quad-tree algorithm, the
+//! `polylabel` crate); the agent is drawn uniformly from the disc around it whose radius is
+//! the distance from the centre to the nearest wall, and its initial heading uniformly from
+//! [0, 2π). The ground truth is the [`AgentPose`](activesense_core::Pose2) `(a, h)` in the
+//! model frame (see `docs/ARCHITECTURE.md`, "Frames").
+
+use crate::sensor::{RangeKind, SensorModel};
+use activesense_core::agents::Action;
+use activesense_core::episode::{EpisodeConfig, EpisodeState, Observation};
+use activesense_core::geometry::{v2, Vec2};
+use activesense_core::math::{cos, sin, sqrt, TAU};
+use activesense_core::{FloorPlan, Pose2};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg32;
+use serde::{Deserialize, Serialize};
+
+/// Visual centre and the radius of the placement disc.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Placement {
+    /// Pole of inaccessibility (model frame).
+    pub visual_centre: [f32; 2],
+    /// Distance from the visual centre to the nearest wall (m).
+    pub radius: f32,
+}
+
+/// Computes the visual centre of `plan` (polylabel, 1 cm tolerance) and the placement radius.
+pub fn placement(plan: &FloorPlan) -> Placement {
+    let ring: Vec<geo_types::Coord<f64>> = plan
+        .vertices()
+        .map(|p| geo_types::coord! { x: p.x as f64, y: p.y as f64 })
+        .collect();
+    let poly = geo_types::Polygon::new(geo_types::LineString::new(ring), vec![]);
+    let c = polylabel::polylabel(&poly, &0.01)
+        .map(|p| v2(p.x() as f32, p.y() as f32))
+        .unwrap_or_else(|_| plan.perimeter_centroid());
+    let radius = plan.nearest_point(c).distance;
+    Placement {
+        visual_centre: [c.x, c.y],
+        radius,
+    }
+}
+
+/// The simulated instrument in its room.
+#[derive(Clone, Debug)]
+pub struct SimWorld {
+    plan: FloorPlan,
+    truth: Pose2,
+    placement: Placement,
+    sensor: SensorModel,
+    state: EpisodeState,
+    rng: Pcg32,
+}
+
+/// What the world knows about one step that the instrument does not report (for the
+/// trajectory log).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepTruth {
+    /// How the range reading arose (measurements only).
+    pub range_kind: Option<RangeKind>,
+    /// Model-frame direction of the beam after the action (rad).
+    pub world_bearing: f32,
+}
+
+impl SimWorld {
+    /// Places the agent in `plan` (model frame) using `seed` and prepares an episode.
+    pub fn new(plan: FloorPlan, sensor: SensorModel, config: EpisodeConfig, seed: u64) -> Self {
+        let mut rng = Pcg32::seed_from_u64(seed);
+        let placement = placement(&plan);
+        let c = v2(placement.visual_centre[0], placement.visual_centre[1]);
+        // Uniform in the disc: radius ∝ sqrt(u). Points exactly on a wall are redrawn.
+        let mut a = c;
+        for _ in 0..100 {
+            let r = placement.radius * sqrt(rng.gen_range(0.0f32..1.0));
+            let phi = rng.gen_range(0.0..TAU);
+            let p = c + v2(r * cos(phi), r * sin(phi));
+            if plan.contains(p) && plan.nearest_point(p).distance > 0.05 {
+                a = p;
+                break;
+            }
+        }
+        let h = rng.gen_range(0.0..TAU);
+        SimWorld {
+            plan,
+            truth: Pose2::new(a.x, a.y, h),
+            placement,
+            sensor,
+            state: EpisodeState::new(config),
+            rng,
+        }
+    }
+
+    /// The ground-truth AgentPose (scene→model).
+    pub fn truth(&self) -> Pose2 {
+        self.truth
+    }
+
+    /// The model (the room).
+    pub fn plan(&self) -> &FloorPlan {
+        &self.plan
+    }
+
+    /// Visual centre and placement radius.
+    pub fn placement(&self) -> Placement {
+        self.placement
+    }
+
+    /// The sensor model.
+    pub fn sensor(&self) -> &SensorModel {
+        &self.sensor
+    }
+
+    /// Model-frame direction of the beam at the current encoder bearing.
+    pub fn world_bearing(&self) -> f32 {
+        self.truth.theta + self.state.bearing()
+    }
+
+    /// Agent position in the model frame.
+    pub fn position(&self) -> Vec2 {
+        self.truth.translation()
+    }
+
+    /// The scan at the current bearing (also sent at episode start).
+    pub fn scan(&mut self) -> u32 {
+        let px = self.sensor.scan(
+            &self.plan,
+            self.position(),
+            self.world_bearing(),
+            &mut self.rng,
+        );
+        Observation::pack_scan(&px)
+    }
+
+    /// Executes one action on the instrument and returns its observation.
+    pub fn act(&mut self, action: Action) -> (Observation, StepTruth) {
+        self.state.apply(action);
+        let (range, kind) = if action == Action::Measure {
+            let (r, k) = self.sensor.measure(
+                &self.plan,
+                self.position(),
+                self.world_bearing(),
+                &mut self.rng,
+            );
+            (r, Some(k))
+        } else {
+            (None, None)
+        };
+        let scan = self.scan();
+        (
+            Observation { range, scan },
+            StepTruth {
+                range_kind: kind,
+                world_bearing: activesense_core::math::wrap_angle(self.world_bearing()),
+            },
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plans;
+
+    #[test]
+    fn agent_inside_disc_and_room() {
+        for seed in plans::TEST_SEEDS.take(200) {
+            let plan = plans::generate(seed);
+            let w = SimWorld::new(
+                plan.clone(),
+                SensorModel::default(),
+                EpisodeConfig::default(),
+                seed as u64,
+            );
+            let p = w.placement();
+            let c = v2(p.visual_centre[0], p.visual_centre[1]);
+            assert!(plan.contains(c), "seed {seed}: visual centre outside");
+            assert!(p.radius > 0.5, "seed {seed}: radius {}", p.radius);
+            let a = w.position();
+            assert!(plan.contains(a), "seed {seed}");
+            assert!((a - c).norm() <= p.radius + 1e-4);
+            assert!((0.0..TAU).contains(&w.truth().theta.rem_euclid(TAU)));
+        }
+    }
+
+    #[test]
+    fn square_visual_centre_is_the_middle() {
+        let sq =
+            FloorPlan::new(&[v2(-4.0, -4.0), v2(4.0, -4.0), v2(4.0, 4.0), v2(-4.0, 4.0)]).unwrap();
+        let p = placement(&sq);
+        assert!(p.visual_centre[0].abs() < 0.02 && p.visual_centre[1].abs() < 0.02);
+        assert!((p.radius - 4.0).abs() < 0.02);
+    }
+}
