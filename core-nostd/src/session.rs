@@ -138,6 +138,12 @@ impl Controller {
         self.running.as_ref().map(|r| r.state.actions).unwrap_or(0)
     }
 
+    /// The latest topological scan of the running episode (the initial one before the
+    /// first observation).
+    pub fn last_scan(&self) -> Option<u32> {
+        self.running.as_ref().map(|r| r.last_scan)
+    }
+
     /// Cycle statistics since power-on / reset.
     pub fn cycles(&self) -> UpdateStats {
         self.cycles
@@ -194,7 +200,8 @@ impl Controller {
             agent: BaselineAgent::new(p.agent, p.seed),
             pending: None,
             no_returns: 0,
-            last_scan: 0,
+            // The scan is not used by the baseline agents; the learnt policy will read it.
+            last_scan: p.initial_scan,
             trace: TraceHash::new(),
             cycles: UpdateStats::default(),
             update_start: self.now(),
@@ -407,6 +414,13 @@ impl Session {
             max_frame: MAX_FRAME as u16,
             capabilities,
         }
+    }
+
+    /// Sends the unsolicited boot announcement (`Hello` with id [`NO_ID`]) the firmware
+    /// emits once its UART is up, so a host knows it may start talking.
+    pub fn announce<W: Write>(&mut self, out: &mut W) -> Result<(), W::Error> {
+        let info = self.device_info();
+        self.send(NO_ID, &Response::Hello(info), out)
     }
 
     /// Current phase.
@@ -723,6 +737,7 @@ mod tests {
             rot_bins: 10,
             known_heading: None,
             ground_truth: Some(Pose2::new(0.5, 0.2, 0.3)),
+            initial_scan: 0,
         }
     }
 

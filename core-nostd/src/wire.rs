@@ -150,6 +150,8 @@ pub struct EpisodeParams {
     pub known_heading: Option<f32>,
     /// Simulation only: the true AgentPose (scene→model), for the device's statistics.
     pub ground_truth: Option<Pose2>,
+    /// The instrument's topological scan before the first action.
+    pub initial_scan: u32,
 }
 
 /// Static description of the device, sent in answer to `Hello`.

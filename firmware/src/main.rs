@@ -130,6 +130,7 @@ fn main() -> ! {
     let mut uart = usart::Usart1::init(115_200, CORE_HZ / 2);
     // SAFETY: the only reference to SESSION, taken once before the serve loop.
     let session: &mut Session = unsafe { &mut *core::ptr::addr_of_mut!(SESSION) };
+    let Ok(()) = session.announce(&mut uart);
     hprintln!(
         "activesense-firmware: serving protocol v{} on USART1",
         activesense_core::wire::PROTOCOL_VERSION

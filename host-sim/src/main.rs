@@ -31,6 +31,10 @@ enum Command {
     Plan(PlanArgs),
     /// Run one simulated episode with a baseline agent and print its step log.
     Episode(EpisodeArgs),
+    /// Run episodes on the instrument controller (QEMU, serial, TCP or loopback) while the host plays its sensors.
+    Sim(activesense_sim::remote::SimArgs),
+    /// Talk to an instrument controller on a serial port.
+    Serial(activesense_sim::remote::SerialArgs),
 }
 
 #[derive(Args)]
@@ -138,6 +142,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Plan(a) => cmd_plan(a),
         Command::Episode(a) => cmd_episode(a),
+        Command::Sim(a) => activesense_sim::remote::cmd_sim(a),
+        Command::Serial(a) => activesense_sim::remote::cmd_serial(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
