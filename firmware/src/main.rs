@@ -53,12 +53,28 @@ fn millis() -> u32 {
 
 /// Core-clock cycles since boot (mod 2^32), from the SysTick count.
 fn cycles() -> u32 {
-    // SYST_CVR counts down from TICK_RELOAD.
-    // SAFETY: read-only access to the SysTick current-value register.
-    let val = unsafe { (*cortex_m::peripheral::SYST::PTR).cvr.read() } & 0x00FF_FFFF;
-    let ms = millis();
-    ms.wrapping_mul(TICK_RELOAD + 1)
-        .wrapping_add(TICK_RELOAD.saturating_sub(val))
+    loop {
+        let ms = millis();
+        // SYST_CVR counts down from TICK_RELOAD.
+        // SAFETY: read-only access to the SysTick current-value register.
+        let val = unsafe { (*cortex_m::peripheral::SYST::PTR).cvr.read() } & 0x00FF_FFFF;
+        // A tick between the two reads would pair a new count with an old millisecond.
+        if millis() == ms {
+            return ms
+                .wrapping_mul(TICK_RELOAD + 1)
+                .wrapping_add(TICK_RELOAD.saturating_sub(val));
+        }
+    }
+}
+
+/// USART1's interrupt (IRQ 37) only wakes the core from `wfi`. The line stays high until
+/// DR is read, so the handler masks it in the NVIC; the main loop reads the data and
+/// unmasks it again before the next `wfi`.
+#[exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    if irqn == usart::IRQN {
+        cortex_m::peripheral::NVIC::mask(usart::Usart1Irq);
+    }
 }
 
 const CONFIG: SessionConfig = SessionConfig {
@@ -128,6 +144,7 @@ fn main() -> ! {
     cp.SYST.enable_counter();
 
     let mut uart = usart::Usart1::init(115_200, CORE_HZ / 2);
+    usart::enable_rx_interrupt();
     // SAFETY: the only reference to SESSION, taken once before the serve loop.
     let session: &mut Session = unsafe { &mut *core::ptr::addr_of_mut!(SESSION) };
     let Ok(()) = session.announce(&mut uart);
@@ -149,6 +166,15 @@ fn main() -> ! {
             }
         } else if session.poll(millis()) {
             hprintln!("activesense-firmware: host silent, episode abandoned");
+        } else {
+            // Sleep until a byte arrives (USART1 IRQ) or the next SysTick. Under QEMU this
+            // also frees the emulator's I/O thread, which a polling loop would starve.
+            cortex_m::peripheral::NVIC::unpend(usart::Usart1Irq);
+            // SAFETY: as at start-up; DefaultHandler only masks the line again.
+            unsafe { cortex_m::peripheral::NVIC::unmask(usart::Usart1Irq) };
+            if !uart.read_ready().unwrap_or(false) {
+                cortex_m::asm::wfi();
+            }
         }
     }
 }

@@ -28,6 +28,27 @@ const CR1_UE: u32 = 1 << 13;
 const CR1_TE: u32 = 1 << 3;
 const CR1_RE: u32 = 1 << 2;
 
+const CR1_RXNEIE: u32 = 1 << 5;
+
+/// USART1 global interrupt number.
+pub const IRQN: i16 = 37;
+
+/// USART1's interrupt line for the NVIC.
+#[derive(Clone, Copy)]
+pub struct Usart1Irq;
+
+// SAFETY: 37 is USART1's position in the STM32F405 vector table.
+unsafe impl cortex_m::interrupt::InterruptNumber for Usart1Irq {
+    fn number(self) -> u16 {
+        IRQN as u16
+    }
+}
+
+/// Lets RXNE raise the USART1 interrupt (to wake from `wfi`).
+pub fn enable_rx_interrupt() {
+    wr(USART1 + CR1, rd(USART1 + CR1) | CR1_RXNEIE);
+}
+
 fn rd(addr: usize) -> u32 {
     // SAFETY: `addr` is one of the fixed, aligned STM32F405 peripheral registers above.
     unsafe { read_volatile(addr as *const u32) }

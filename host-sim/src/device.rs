@@ -297,7 +297,7 @@ impl Qemu {
                 "-semihosting-config",
                 "enable=on,target=native",
                 "-serial",
-                &format!("tcp:127.0.0.1:{port}"),
+                &format!("tcp:127.0.0.1:{port},nodelay=on"),
                 "-kernel",
             ])
             .arg(elf)
