@@ -35,6 +35,26 @@ enum Command {
     Sim(activesense_sim::remote::SimArgs),
     /// Talk to an instrument controller on a serial port.
     Serial(activesense_sim::remote::SerialArgs),
+    /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
+    Dataset(DatasetArgs),
+}
+
+#[derive(Args)]
+struct DatasetArgs {
+    /// Which published seed range to summarise.
+    #[arg(long, value_enum, default_value = "test")]
+    split: Split,
+    /// Summarise only the first N plans of the split.
+    #[arg(long)]
+    plans: Option<u32>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Split {
+    /// Seeds 1000000..1001000.
+    Test,
+    /// Seeds 0..1000000.
+    Train,
 }
 
 #[derive(Args)]
@@ -142,6 +162,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Plan(a) => cmd_plan(a),
         Command::Episode(a) => cmd_episode(a),
+        Command::Dataset(a) => cmd_dataset(a),
         Command::Sim(a) => activesense_sim::remote::cmd_sim(a),
         Command::Serial(a) => activesense_sim::remote::cmd_serial(a),
     };
@@ -294,6 +315,42 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         };
         write_file(path, &svg::render(&t.plan, &scene))?;
         println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn cmd_dataset(a: DatasetArgs) -> Result<()> {
+    let range = match a.split {
+        Split::Test => plans::TEST_SEEDS,
+        Split::Train => plans::TRAIN_SEEDS,
+    };
+    let n = a
+        .plans
+        .unwrap_or(range.end - range.start)
+        .min(range.end - range.start);
+    let mut by_shape: std::collections::BTreeMap<String, (u32, usize, usize, f32, f32)> =
+        Default::default();
+    for seed in range.start..range.start + n {
+        let g = plans::generate_detailed(seed, None);
+        let (lo, hi) = g.plan.bounds();
+        let side = (hi - lo).x.max((hi - lo).y);
+        let e = by_shape
+            .entry(format!("{:?} ({:?})", g.shape, g.family))
+            .or_insert((0, usize::MAX, 0, f32::INFINITY, 0.0));
+        e.0 += 1;
+        e.1 = e.1.min(g.plan.len());
+        e.2 = e.2.max(g.plan.len());
+        e.3 = e.3.min(side);
+        e.4 = e.4.max(side);
+    }
+    println!("{n} plans from seed {}", range.start);
+    println!("| shape (family) | plans | share | vertices | longest side (m) |");
+    println!("|---|---:|---:|---|---|");
+    for (k, (c, vmin, vmax, smin, smax)) in by_shape {
+        println!(
+            "| {k} | {c} | {:.1}% | {vmin}–{vmax} | {smin:.1}–{smax:.1} |",
+            100.0 * c as f32 / n as f32
+        );
     }
     Ok(())
 }

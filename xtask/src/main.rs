@@ -1,1 +1,273 @@
-fn main() {}
+//! `cargo xtask` — project automation in Rust instead of shell scripts (the
+//! rust-embedded / RTIC way): installing the tools CI needs, building the firmware,
+//! booting it under QEMU, and running the whole test suite.
+//!
+//! ```text
+//! cargo xtask ci           # the whole test suite, installing what it needs (what .ci/run calls)
+//! cargo xtask setup        # only the installs: thumbv7em-none-eabihf target, qemu-system-arm
+//! cargo xtask firmware     # build the firmware ELF (profile `firmware`)
+//! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
+//! ```
+
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const TARGET: &str = "thumbv7em-none-eabihf";
+const FIRMWARE_PROFILE: &str = "firmware";
+const FIRMWARE_BIN: &str = "activesense-firmware";
+/// The line the firmware prints over semihosting once the core has initialised.
+const SMOKE_LINE: &str = "core initialised";
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let result = match args.first().map(String::as_str) {
+        Some("ci") => ci(),
+        Some("setup") => setup(),
+        Some("firmware") => build_firmware().map(|p| println!("{}", p.display())),
+        Some("qemu-smoke") => qemu_smoke(),
+        Some("help") | Some("--help") | Some("-h") | None => {
+            print_help();
+            Ok(())
+        }
+        Some(other) => {
+            print_help();
+            Err(anyhow::anyhow!("unknown xtask '{other}'"))
+        }
+    };
+    if let Err(e) = result {
+        eprintln!("xtask error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn print_help() {
+    println!(
+        "cargo xtask <task>\n\n\
+         tasks:\n  \
+         ci          whole test suite (installs the thumb target and qemu-system-arm if missing)\n  \
+         setup       install the thumbv7em-none-eabihf target and qemu-system-arm if missing\n  \
+         firmware    build the firmware ELF and print its path\n  \
+         qemu-smoke  boot the firmware under qemu-system-arm -M netduinoplus2 and check its boot line"
+    );
+}
+
+/// The workspace root (xtask lives one level below it).
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+fn cargo() -> Command {
+    let mut c = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()));
+    c.current_dir(root());
+    c
+}
+
+fn run(cmd: &mut Command) -> Result<()> {
+    eprintln!("xtask: running {cmd:?}");
+    let status = cmd
+        .status()
+        .with_context(|| format!("cannot start {cmd:?}"))?;
+    if !status.success() {
+        bail!("{cmd:?} failed with {status}");
+    }
+    Ok(())
+}
+
+fn have(program: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {program}")])
+        .stdout(Stdio::null())
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false)
+}
+
+/// Installs what a fresh machine lacks. Idempotent and quiet when all is present.
+fn setup() -> Result<()> {
+    let installed = Command::new("rustup")
+        .args(["target", "list", "--installed"])
+        .output()
+        .context("rustup is required")?;
+    if !String::from_utf8_lossy(&installed.stdout)
+        .lines()
+        .any(|l| l.trim() == TARGET)
+    {
+        run(Command::new("rustup").args(["target", "add", TARGET]))?;
+    }
+    if !have("qemu-system-arm") {
+        let sudo = if Command::new("id")
+            .arg("-u")
+            .output()
+            .map(|o| o.stdout != b"0\n")
+            .unwrap_or(true)
+        {
+            "sudo "
+        } else {
+            ""
+        };
+        run(Command::new("sh").args([
+            "-c",
+            &format!(
+                "{sudo}apt-get update -qq && DEBIAN_FRONTEND=noninteractive {sudo}apt-get install -y -qq qemu-system-arm"
+            ),
+        ]))?;
+    }
+    Ok(())
+}
+
+/// Builds the firmware and returns the ELF path.
+fn build_firmware() -> Result<PathBuf> {
+    run(cargo().args([
+        "build",
+        "-p",
+        "activesense-firmware",
+        "--target",
+        TARGET,
+        "--profile",
+        FIRMWARE_PROFILE,
+    ]))?;
+    let elf = root()
+        .join("target")
+        .join(TARGET)
+        .join(FIRMWARE_PROFILE)
+        .join(FIRMWARE_BIN);
+    if !elf.exists() {
+        bail!("firmware ELF not found at {}", elf.display());
+    }
+    Ok(elf)
+}
+
+/// QEMU command line for the netduinoplus2 board with semihosting; serial0 is USART1.
+pub fn qemu_command(elf: &Path) -> Command {
+    let mut c = Command::new("qemu-system-arm");
+    c.args([
+        "-cpu",
+        "cortex-m4",
+        "-machine",
+        "netduinoplus2",
+        "-nographic",
+        "-monitor",
+        "none",
+        "-semihosting-config",
+        "enable=on,target=native",
+        "-kernel",
+    ])
+    .arg(elf);
+    c
+}
+
+/// Boots the firmware, waits (bounded) for it to exit, and checks the boot line and status.
+fn qemu_smoke() -> Result<()> {
+    setup()?;
+    let elf = build_firmware()?;
+    let mut cmd = qemu_command(&elf);
+    cmd.args(["-serial", "null"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    eprintln!("xtask: running {cmd:?}");
+    let mut child = cmd.spawn().context("cannot start qemu-system-arm")?;
+    let started = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait()? {
+            break s;
+        }
+        if started.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            bail!("firmware did not exit within 60 s under QEMU");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let out = child.wait_with_output()?;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    print!("{stdout}");
+    eprint!("{}", String::from_utf8_lossy(&out.stderr));
+    if !status.success() {
+        bail!("firmware exited with {status}");
+    }
+    if !stdout.contains(SMOKE_LINE) {
+        bail!("firmware did not print '{SMOKE_LINE}'");
+    }
+    println!("qemu-smoke: ok ({:.1} s)", started.elapsed().as_secs_f32());
+    Ok(())
+}
+
+/// The whole test suite: installs, formatting, the MCU build of the core, the firmware under
+/// QEMU, and every host test (the integration tests include the QEMU hardware-in-the-loop
+/// run, which uses the firmware built here).
+fn ci() -> Result<()> {
+    let t0 = Instant::now();
+    setup()?;
+    run(cargo().args(["fmt", "--all", "--check"]))?;
+    run(cargo().args([
+        "clippy",
+        "--workspace",
+        "--exclude",
+        "activesense-firmware",
+        "--all-targets",
+        "--",
+        "-D",
+        "warnings",
+    ]))?;
+    run(cargo().args([
+        "clippy",
+        "-p",
+        "activesense-firmware",
+        "--target",
+        TARGET,
+        "--",
+        "-D",
+        "warnings",
+    ]))?;
+    run(cargo().args(["build", "-p", "activesense-core", "--target", TARGET]))?;
+    qemu_smoke()?;
+    let (passed, failed, ignored) =
+        test_counted(cargo().args(["test", "--workspace", "--exclude", "activesense-firmware"]))?;
+    println!("xtask ci: all green in {:.0} s", t0.elapsed().as_secs_f32());
+    // The plain closing line CI readers look for.
+    println!("ci: {passed} passed, {failed} failed, {ignored} skipped");
+    Ok(())
+}
+
+/// Runs a `cargo test` command, echoing its output, and totals the "test result" lines.
+fn test_counted(cmd: &mut Command) -> Result<(u64, u64, u64)> {
+    use std::io::{BufRead, BufReader};
+    eprintln!("xtask: running {cmd:?}");
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("cannot start {cmd:?}"))?;
+    let (mut passed, mut failed, mut ignored) = (0, 0, 0);
+    let stdout = child.stdout.take().context("no stdout")?;
+    for line in BufReader::new(stdout).lines() {
+        let line = line?;
+        println!("{line}");
+        if let Some(rest) = line.strip_prefix("test result: ") {
+            for part in rest.split([';', '.']) {
+                let mut it = part.split_whitespace();
+                if let (Some(n), Some(what)) = (it.next(), it.next()) {
+                    let n: u64 = n.parse().unwrap_or(0);
+                    match what {
+                        "passed" => passed += n,
+                        "failed" => failed += n,
+                        "ignored" => ignored += n,
+                        _ => {}
+                    }
+                }
+            }
+        }
+    }
+    let status = child.wait()?;
+    if !status.success() {
+        println!("ci: {passed} passed, {failed} failed, {ignored} skipped");
+        bail!("{cmd:?} failed with {status}");
+    }
+    if passed == 0 {
+        bail!("cargo test ran no test");
+    }
+    Ok((passed, failed, ignored))
+}

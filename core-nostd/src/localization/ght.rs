@@ -1,0 +1,521 @@
+//! The GHT localizer: Algorithm 1 (preconditions) and Algorithm 2 (weighted voting) of
+//! paper §3.2, a non-destructive accumulator, and a staging area.
+//!
+//! ## One measurement `(β, r)`
+//! For every rotation bin `j` and every rotation hypothesis `h` of that bin
+//! ([`LocalizerConfig::sub_bins`]) the ray direction in the model frame is `u = unit(h + β)`.
+//! For every R-table point `d` (position `m_d`, outward normal `n_d`):
+//!
+//! * **Algorithm 1, incidence**: the ray must hit the wall from inside at a feasible angle,
+//!   `u·n_d ≥ cos(max_incidence)`.
+//! * **Algorithm 1, inside**: the hypothesised agent position `a = m_d − r·u` must lie in a
+//!   grid cell whose centre is inside the model (the interior mask, computed once per plan
+//!   with the exact point-in-polygon test; O(1) per vote instead of O(walls)).
+//! * **Algorithm 2**: `a` votes into the `(2·spread+1)²` neighbourhood of its cell (interior
+//!   cells only). For a neighbour centre `c` with offset `δ = c − a`, split into the
+//!   component along the ray `δ_∥ = δ·u` and across it `δ_⊥ = u × δ`:
+//!   `w = exp(−δ_∥²/2σ_∥² − δ_⊥²/2σ_⊥²)`, with
+//!   - measurement-model term `σ_∥² = σ_r² + σ_g²` (sensor range noise + grid quantisation,
+//!     `σ_g` = half the larger cell side);
+//!   - spatial-proximity term `σ_g²` in both directions;
+//!   - rotational-proximity term `σ_⊥² = σ_g² + (r·Δ)²/12`: a heading error that is uniform
+//!     over the spacing `Δ = 2π/(K·S)` of the rotation hypotheses moves the vote across the
+//!     ray by up to `r·Δ/2`, so the kernel widens across the ray in proportion to the range.
+//!
+//! Within one measurement the votes of a layer are combined by **maximum** in a one-layer
+//! scratch buffer (the measurement's evidence for a cell is its best explanation, so a cell
+//! crossed by several perimeter points or sub-hypotheses is not counted several times); the
+//! scratch layer is then **added** to the committed accumulator. Voting only ever adds, so
+//! an outlier cannot zero the belief (paper: "non-destructive").
+//!
+//! The staging area ([`GhtLocalizer::stage`]) runs the same vote into the scratch layer and
+//! folds it into an entropy sum without writing the accumulator.
+
+use crate::geometry::{unit, Vec2};
+use crate::math::{cos, exp, ln};
+use crate::{FloorPlan, Pose2};
+use heapless::Vec as HVec;
+use serde::{Deserialize, Serialize};
+
+use super::grid::{self, CellIndex, GridSpec, Mode};
+use super::rtable::RTable;
+use super::{Confidence, LocError, LocalizerConfig, MAX_CELLS, MAX_LAYER_CELLS, MAX_RTABLE_POINTS};
+
+/// What one vote (committed or staged) did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct VoteStats {
+    /// (perimeter point, rotation hypothesis) pairs that passed both preconditions.
+    pub votes: u32,
+    /// Total weight the measurement adds to the accumulator.
+    pub mass: f32,
+}
+
+/// Result of evaluating a hypothetical measurement in the staging area.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Staged {
+    /// Shannon entropy (nats) the belief would have after committing the measurement.
+    pub entropy: f32,
+    /// The vote statistics of the hypothetical measurement.
+    pub stats: VoteStats,
+}
+
+/// The GHT localizer. One fixed-size value (≤ 48 KiB at capacity), no allocation.
+#[derive(Clone, Debug)]
+pub struct GhtLocalizer {
+    cfg: LocalizerConfig,
+    grid: GridSpec,
+    rtable: RTable,
+    interior: [bool; MAX_LAYER_CELLS],
+    n_interior: u16,
+    belief: [f32; MAX_CELLS],
+    total: f32,
+    vmax: f32,
+    z: f32,
+    scratch: [f32; MAX_LAYER_CELLS],
+    updates: u32,
+    ready: bool,
+}
+
+impl GhtLocalizer {
+    /// An empty localizer for a `static` or other in-place storage; call
+    /// [`GhtLocalizer::reset`] before use.
+    pub const fn new_empty() -> Self {
+        GhtLocalizer {
+            cfg: LocalizerConfig::DEFAULT,
+            grid: GridSpec::EMPTY,
+            rtable: RTable::new_empty(),
+            interior: [false; MAX_LAYER_CELLS],
+            n_interior: 0,
+            belief: [0.0; MAX_CELLS],
+            total: 0.0,
+            vmax: 0.0,
+            z: 0.0,
+            scratch: [0.0; MAX_LAYER_CELLS],
+            updates: 0,
+            ready: false,
+        }
+    }
+
+    /// Prepares the localizer for a (centred) plan: validates, builds the grid over the
+    /// plan's bounding box, the interior mask and the R-table, and clears the belief.
+    /// On error the localizer is left not ready.
+    pub fn reset(&mut self, plan: &FloorPlan, cfg: &LocalizerConfig) -> Result<(), LocError> {
+        self.ready = false;
+        cfg.validate()?;
+        plan.validate().map_err(LocError::BadPlan)?;
+        let (lo, hi) = plan.bounds();
+        let c = plan.perimeter_centroid();
+        let ext = (hi - lo).x.max((hi - lo).y);
+        if c.x.abs() > 1e-3 * ext || c.y.abs() > 1e-3 * ext {
+            return Err(LocError::PlanNotCentred);
+        }
+        let grid = GridSpec::over_bounds(lo, hi, cfg.nx, cfg.ny, cfg.rot_bins, cfg.known_heading);
+        let spacing = if cfg.perimeter_spacing > 0.0 {
+            cfg.perimeter_spacing
+        } else {
+            let auto = 0.5 * grid.cell[0].min(grid.cell[1]);
+            // Each wall gets at most len/spacing + 1 points.
+            let fit = plan.perimeter() / (MAX_RTABLE_POINTS - plan.len()) as f32;
+            auto.max(fit * 1.001)
+        };
+        self.rtable.rebuild(plan, spacing)?;
+        let mut n = 0u16;
+        for iy in 0..grid.ny as usize {
+            for ix in 0..grid.nx as usize {
+                let inside = plan.contains(grid.cell_centre(ix, iy));
+                self.interior[iy * grid.nx as usize + ix] = inside;
+                n += inside as u16;
+            }
+        }
+        self.n_interior = n;
+        self.cfg = *cfg;
+        self.grid = grid;
+        self.clear();
+        self.ready = true;
+        Ok(())
+    }
+
+    /// Forgets all votes (new episode on the same plan); keeps grid and R-table.
+    pub fn clear(&mut self) {
+        self.belief.fill(0.0);
+        self.scratch.fill(0.0);
+        self.total = 0.0;
+        self.vmax = 0.0;
+        self.updates = 0;
+        self.z = self.normaliser();
+    }
+
+    /// Sets the known heading for `K = 1` (new episode on the same plan; clears the votes).
+    pub fn set_known_heading(&mut self, h: f32) {
+        self.cfg.known_heading = h;
+        self.grid.known_heading = crate::math::wrap_angle(h);
+        self.clear();
+    }
+
+    /// True after a successful [`GhtLocalizer::reset`].
+    pub fn is_ready(&self) -> bool {
+        self.ready
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &LocalizerConfig {
+        &self.cfg
+    }
+
+    /// The grid geometry.
+    pub fn grid(&self) -> &GridSpec {
+        &self.grid
+    }
+
+    /// The R-table.
+    pub fn rtable(&self) -> &RTable {
+        &self.rtable
+    }
+
+    /// True when the centre of column `ix`, row `iy` lies inside the model.
+    pub fn is_interior(&self, ix: usize, iy: usize) -> bool {
+        ix < self.grid.nx as usize
+            && iy < self.grid.ny as usize
+            && self.interior[iy * self.grid.nx as usize + ix]
+    }
+
+    /// Number of interior cells per rotation layer.
+    pub fn interior_cells(&self) -> usize {
+        self.n_interior as usize
+    }
+
+    /// Committed measurements so far.
+    pub fn updates(&self) -> u32 {
+        self.updates
+    }
+
+    /// The raw (unnormalised) accumulator in the grid layout, `grid().len()` long.
+    pub fn weights(&self) -> &[f32] {
+        &self.belief[..self.grid.len()]
+    }
+
+    /// Sum of the accumulator.
+    pub fn total_weight(&self) -> f32 {
+        self.total
+    }
+
+    fn check(&self, bearing: f32, range: f32) -> Result<(), LocError> {
+        if !self.ready {
+            return Err(LocError::NotReady);
+        }
+        if !bearing.is_finite() || !range.is_finite() || range <= 0.0 {
+            return Err(LocError::BadMeasurement);
+        }
+        Ok(())
+    }
+
+    /// Commits one measurement (encoder bearing `β` rad, range `r` m). A no-return must not
+    /// be passed (it carries no range).
+    pub fn update(&mut self, bearing: f32, range: f32) -> Result<VoteStats, LocError> {
+        self.check(bearing, range)?;
+        let l = self.grid.layer_len();
+        let mut stats = VoteStats::default();
+        for j in 0..self.grid.rot_bins {
+            stats.votes += vote_layer(
+                &self.grid,
+                &self.cfg,
+                &self.rtable,
+                &self.interior,
+                &mut self.scratch[..l],
+                j,
+                bearing,
+                range,
+            );
+            let layer = &mut self.belief[j as usize * l..(j as usize + 1) * l];
+            for (b, &s) in layer.iter_mut().zip(self.scratch[..l].iter()) {
+                *b += s;
+                stats.mass += s;
+                if *b > self.vmax {
+                    self.vmax = *b;
+                }
+            }
+        }
+        self.total += stats.mass;
+        self.updates += 1;
+        self.z = self.normaliser();
+        Ok(stats)
+    }
+
+    /// Evaluates a hypothetical measurement without committing it: the entropy the belief
+    /// would have after [`GhtLocalizer::update`] with the same arguments. Only the scratch
+    /// layer is written; the committed belief is untouched.
+    pub fn stage(&mut self, bearing: f32, range: f32) -> Result<Staged, LocError> {
+        self.check(bearing, range)?;
+        let l = self.grid.layer_len();
+        let mut stats = VoteStats::default();
+        // Each measurement adds at most 1 to a cell, so vmax + 1 bounds every staged value.
+        let mut acc = EntropyAcc::new(self.cfg.evidence_gain, self.vmax + 1.0);
+        for j in 0..self.grid.rot_bins {
+            stats.votes += vote_layer(
+                &self.grid,
+                &self.cfg,
+                &self.rtable,
+                &self.interior,
+                &mut self.scratch[..l],
+                j,
+                bearing,
+                range,
+            );
+            let layer = &self.belief[j as usize * l..(j as usize + 1) * l];
+            for ((&b, &s), &inside) in layer.iter().zip(&self.scratch[..l]).zip(&self.interior) {
+                if inside {
+                    acc.add(b + s);
+                }
+                stats.mass += s;
+            }
+        }
+        Ok(Staged {
+            entropy: acc.entropy(self.uniform_entropy()),
+            stats,
+        })
+    }
+
+    fn uniform_entropy(&self) -> f32 {
+        let n = self.n_interior as usize * self.grid.rot_bins as usize;
+        if n == 0 {
+            0.0
+        } else {
+            ln(n as f32)
+        }
+    }
+
+    /// Unnormalised probability of flat cell `i` (see [`LocalizerConfig::evidence_gain`]).
+    #[inline]
+    fn q(&self, i: usize) -> f32 {
+        let l = self.grid.layer_len();
+        if l == 0 || !self.interior[i % l] {
+            return 0.0;
+        }
+        let v = self.belief[i];
+        if self.cfg.evidence_gain > 0.0 {
+            exp(self.cfg.evidence_gain * (v - self.vmax))
+        } else if self.total > 0.0 {
+            v
+        } else {
+            1.0
+        }
+    }
+
+    fn normaliser(&self) -> f32 {
+        (0..self.grid.len()).map(|i| self.q(i)).sum()
+    }
+
+    /// Normalised probability of flat cell `i` (`i < grid().len()`).
+    #[inline]
+    pub fn prob(&self, i: usize) -> f32 {
+        if self.z > 0.0 {
+            self.q(i) / self.z
+        } else {
+            0.0
+        }
+    }
+
+    /// Shannon entropy (nats) of the normalised belief. Before any vote the belief is
+    /// uniform over the interior cells: `ln(interior cells × K)`.
+    pub fn entropy(&self) -> f32 {
+        let mut acc = EntropyAcc::new(self.cfg.evidence_gain, self.vmax);
+        let l = self.grid.layer_len();
+        for (i, &b) in self.weights().iter().enumerate() {
+            if self.interior[i % l] {
+                acc.add(b);
+            }
+        }
+        acc.entropy(self.uniform_entropy())
+    }
+
+    /// Normalised probability of one cell (uniform over interior cells before any vote).
+    pub fn pmf(&self, c: CellIndex) -> f32 {
+        self.prob(self.grid.index(c))
+    }
+
+    /// Writes the normalised PMF (grid layout, `grid().len()` values) into `out`; returns
+    /// the number of values written (`min(out.len(), grid().len())`; a short buffer gets
+    /// the first values). `Err(NotReady)` before [`GhtLocalizer::reset`].
+    pub fn pmf_into(&self, out: &mut [f32]) -> Result<usize, LocError> {
+        if !self.ready {
+            return Err(LocError::NotReady);
+        }
+        let n = self.grid.len().min(out.len());
+        for (i, o) in out[..n].iter_mut().enumerate() {
+            *o = self.prob(i);
+        }
+        Ok(n)
+    }
+
+    /// The most voted cell (first on ties); `None` before any vote.
+    pub fn argmax(&self) -> Option<CellIndex> {
+        if !self.ready || self.total <= 0.0 {
+            return None;
+        }
+        Some(self.grid.cell_at(grid::argmax(self.weights())))
+    }
+
+    /// The AgentPose of the most voted cell; `None` before any vote.
+    pub fn estimate(&self) -> Option<Pose2> {
+        self.argmax().map(|c| self.grid.pose_of(c))
+    }
+
+    /// Up to `N` modes, strongest first, separated by more than `min_separation` cells /
+    /// bins (see [`grid::top_modes`]).
+    pub fn top_modes<const N: usize>(&self, min_separation: u8) -> HVec<Mode, N> {
+        grid::top_modes(&self.grid, self.weights(), min_separation, |i| self.prob(i))
+    }
+
+    /// The coarse-success test of the argmax against a ground-truth AgentPose
+    /// ([`GridSpec::coarse_success`]); false before any vote.
+    pub fn coarse_success(&self, truth: &Pose2, symmetry_order: u8) -> bool {
+        self.argmax()
+            .is_some_and(|c| self.grid.coarse_success(c, truth, symmetry_order))
+    }
+
+    /// PMF mass within the coarse tolerance of the argmax and its C_n equivalents.
+    pub fn peak_mass(&self, symmetry_order: u8) -> f32 {
+        match self.argmax() {
+            Some(c) => grid::mass_near(&self.grid, self.grid.len(), c, symmetry_order, |i| {
+                self.prob(i)
+            }),
+            None => 0.0,
+        }
+    }
+
+    /// The no-ground-truth test: peak mass ≥ `min_peak_mass` and entropy ≤ `max_entropy`.
+    pub fn is_confident(&self, crit: &Confidence, symmetry_order: u8) -> bool {
+        self.total > 0.0
+            && self.peak_mass(symmetry_order) >= crit.min_peak_mass
+            && self.entropy() <= crit.max_entropy
+    }
+}
+
+impl Default for GhtLocalizer {
+    fn default() -> Self {
+        Self::new_empty()
+    }
+}
+
+/// Running `Z = Σq`, `S = Σ q ln q` over the interior cells in a fixed order, with
+/// `q = exp(λ(v − ref))` (or `q = v` when `λ = 0`); `H = ln Z − S/Z`. Committed and staged
+/// entropy share it.
+struct EntropyAcc {
+    gain: f32,
+    reference: f32,
+    z: f32,
+    s: f32,
+}
+
+impl EntropyAcc {
+    fn new(gain: f32, reference: f32) -> Self {
+        EntropyAcc {
+            gain,
+            reference,
+            z: 0.0,
+            s: 0.0,
+        }
+    }
+
+    #[inline]
+    fn add(&mut self, v: f32) {
+        if self.gain > 0.0 {
+            let x = self.gain * (v - self.reference);
+            let q = exp(x);
+            self.z += q;
+            self.s += q * x;
+        } else if v > 0.0 {
+            self.z += v;
+            self.s += v * ln(v);
+        }
+    }
+
+    fn entropy(&self, uniform: f32) -> f32 {
+        if self.z <= 0.0 {
+            uniform
+        } else {
+            (ln(self.z) - self.s / self.z).max(0.0)
+        }
+    }
+}
+
+/// Algorithms 1 and 2 for one rotation bin: fills `scratch` (one layer) with the
+/// max-combined votes of measurement `(bearing, range)`; returns the number of votes.
+#[allow(clippy::too_many_arguments)]
+fn vote_layer(
+    grid: &GridSpec,
+    cfg: &LocalizerConfig,
+    rtable: &RTable,
+    interior: &[bool; MAX_LAYER_CELLS],
+    scratch: &mut [f32],
+    bin: u8,
+    bearing: f32,
+    range: f32,
+) -> u32 {
+    scratch.fill(0.0);
+    let nx = grid.nx as i32;
+    let ny = grid.ny as i32;
+    let (cw, ch) = (grid.cell[0], grid.cell[1]);
+    let (inv_w, inv_h) = (1.0 / cw, 1.0 / ch);
+    let (x0, y0) = (grid.origin[0], grid.origin[1]);
+    let sg = 0.5 * cw.max(ch);
+    let sub = cfg.effective_sub_bins();
+    let delta = if grid.rot_bins > 1 {
+        grid.bin_width() / sub as f32
+    } else {
+        0.0
+    };
+    let rd = range * delta;
+    let k_par = 0.5 / (sg * sg + cfg.range_sigma * cfg.range_sigma);
+    let k_perp = 0.5 / (sg * sg + rd * rd / 12.0);
+    let cos_min = cos(cfg.max_incidence);
+    let spread = cfg.spread as i32;
+    let mut votes = 0u32;
+    for s in 0..sub {
+        let h = if grid.rot_bins > 1 {
+            bin as f32 * grid.bin_width() - 0.5 * grid.bin_width() + (s as f32 + 0.5) * delta
+        } else {
+            grid.known_heading
+        };
+        let u: Vec2 = unit(h + bearing);
+        let (ux, uy) = (u.x, u.y);
+        let (ox, oy) = (range * ux, range * uy);
+        for p in rtable.points() {
+            // Algorithm 1: incidence precondition.
+            if ux * p.n[0] + uy * p.n[1] < cos_min {
+                continue;
+            }
+            let ax = p.m[0] - ox;
+            let ay = p.m[1] - oy;
+            let fx = (ax - x0) * inv_w;
+            let fy = (ay - y0) * inv_h;
+            // Algorithm 1: hypothesised agent inside the model (grid, then interior mask).
+            if !(fx >= 0.0 && fy >= 0.0 && fx < nx as f32 && fy < ny as f32) {
+                continue;
+            }
+            let (cx, cy) = (fx as i32, fy as i32);
+            if !interior[(cy * nx + cx) as usize] {
+                continue;
+            }
+            votes += 1;
+            // Algorithm 2: weighted vote into the neighbourhood.
+            for jy in (cy - spread).max(0)..=(cy + spread).min(ny - 1) {
+                let dy = y0 + (jy as f32 + 0.5) * ch - ay;
+                for jx in (cx - spread).max(0)..=(cx + spread).min(nx - 1) {
+                    let idx = (jy * nx + jx) as usize;
+                    if !interior[idx] {
+                        continue;
+                    }
+                    let dx = x0 + (jx as f32 + 0.5) * cw - ax;
+                    let par = dx * ux + dy * uy;
+                    let perp = ux * dy - uy * dx;
+                    let w = exp(-(par * par * k_par + perp * perp * k_perp));
+                    if w > scratch[idx] {
+                        scratch[idx] = w;
+                    }
+                }
+            }
+        }
+    }
+    votes
+}

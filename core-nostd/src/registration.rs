@@ -1,0 +1,1153 @@
+//! Sparse registration (paper §3.3): Sparse ICP (Algorithm 4) with constrained,
+//! incidence-weighted correspondences, percentile outlier rejection and the closed-form
+//! weighted SE(2) solve of equation 6, wrapped in annealed perturbations (Algorithm 3,
+//! after Arun Srivatsan et al. 2019).
+//!
+//! ## Frames and inputs
+//!
+//! * The model is the **centred** [`FloorPlan`] (model frame M, origin at the perimeter
+//!   centroid).
+//! * Observations are EDM measurements `(β, r)`: bearing `β` in the scene frame S
+//!   (instrument at the origin, x axis at encoder bearing 0) and range `r`; the scene point
+//!   is `sᵢ = r·unit(β)` and the ray direction `unit(β)`. No-returns must not be passed in.
+//! * Poses are **AgentPoses** `P = (a, h)`: the scene→model transform (`P(s) = R(h)s + a`).
+//!   Equation 6 estimates the registration `T = P⁻¹` (model→scene); the functions here take
+//!   and return AgentPoses and invert internally.
+//!
+//! ## Sparse ICP (Algorithm 4)
+//!
+//! Each iteration, with the current estimate `P_k`:
+//!
+//! 1. **Correspondences.** Every observation is mapped into the model, `mᵢ' = P_k(sᵢ)`, with
+//!    its ray direction `dᵢ = R(h_k)·unit(βᵢ)`. Its correspondent is the nearest point of the
+//!    outline among the walls satisfying the constraints `C`: the wall's outward normal
+//!    `n` faces the ray (`dᵢ·n > 0`: the ray reaches the wall from inside the room) and the
+//!    incidence angle `acos(dᵢ·n)` is at most [`IcpParams::max_incidence`], and the point
+//!    is visible from the hypothesised instrument position `a_k` (no other wall on the line
+//!    of sight, [`VISIBILITY_TOLERANCE`]; so an instrument placed outside the room or behind
+//!    a corner finds no feasible wall). The pair is
+//!    weighted by the cosine of the incidence, `wᵢ = dᵢ·n`. If no wall is feasible the
+//!    constraints are relaxed to the plain nearest point with the lower weight
+//!    [`IcpParams::relaxed_weight`].
+//! 2. **Outlier rejection** (Rusinkiewicz & Levoy 2001): pairs whose distance lies above the
+//!    [`IcpParams::keep_fraction`] percentile of the distances are dropped, except that a
+//!    pair closer than [`IcpParams::reject_min_distance`] is always kept (so converged,
+//!    noise-level residuals are never thrown away) and at least [`IcpParams::min_pairs`]
+//!    pairs survive.
+//! 3. **Solve** (equation 6) for `T = argmin Σ wᵢ ‖T(mᵢ) − sᵢ‖²` in closed form:
+//!    `Γ = (M − m̄)ᵀ W (O − ō)`, `ϑ = atan2(Γ₀₁ − Γ₁₀, tr Γ)`, `t = ō − R(ϑ) m̄` (weighted
+//!    centroids; `atan2` instead of `arctan` gives the full angle range). The solve is
+//!    absolute (model points against scene points), so no increments accumulate.
+//!    With [`IcpParams::fixed_heading`] the rotation is kept and only `t` is solved (the
+//!    K = 1 case where the heading is known exactly).
+//! 4. **Convergence** when the pose changes by less than
+//!    [`IcpParams::translation_tolerance`] and [`IcpParams::rotation_tolerance`], or after
+//!    [`IcpParams::max_iterations`].
+//!
+//! The **registration error** `E(P)` ([`registration_error`]) is the weighted RMS distance
+//! of the inlier pairs found at `P` (steps 1–2): `E = sqrt(Σ wᵢ dᵢ² / Σ wᵢ)`. ICP returns the
+//! visited pose with the smallest `E` (normally the last one).
+//!
+//! ## Annealed perturbation (Algorithm 3)
+//!
+//! From the current estimate `P_k`, `M` perturbations `P_k ⊕ ε` with
+//! `ε ~ N(0, diag(σ_t², σ_t², σ_θ²))` (position in the model frame, heading) are drawn;
+//! together with `P_k` itself (j = 0) the one with the smallest `E` is picked, ICP is run
+//! from it, and its result is accepted if it lowers `E`, else the picked perturbation is
+//! kept. Then `σ_t = g_t·√E`, `σ_θ = g_θ·√E` (capped). The loop stops after
+//! [`AnnealParams::patience`] rounds without improvement, when `E` falls below
+//! [`AnnealParams::min_error`], or after [`AnnealParams::max_rounds`]. Gaussian noise comes
+//! from a seeded [`Pcg32`] through Box–Muller in f32 (libm), so a seed fixes the result
+//! bit for bit on host and MCU. Nothing is allocated; the per-call scratch is a few KiB of
+//! stack ([`MAX_OBSERVATIONS`] pairs).
+
+use crate::floorplan::{closest_on_segment, FloorPlan};
+use crate::geometry::{length, rotate, unit, v2, Pose2, Vec2};
+use crate::math::{abs, atan2, cos, ln, sin, sqrt, wrap_angle, TAU};
+use heapless::Vec as HVec;
+use rand_core::{RngCore, SeedableRng};
+use rand_pcg::Pcg32;
+use serde::{Deserialize, Serialize};
+
+/// Fixed capacity of an observation set.
+pub const MAX_OBSERVATIONS: usize = 128;
+
+/// Longest accepted range (m); far beyond any EDM and any valid plan.
+pub const MAX_RANGE: f32 = 1000.0;
+
+/// Slack (m) of the visibility constraint: a correspondent counts as visible from the
+/// instrument when the first wall on the line of sight is no nearer than this before it.
+pub const VISIBILITY_TOLERANCE: f32 = 1e-3;
+
+/// Why a registration could not be computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum RegistrationError {
+    /// More than [`MAX_OBSERVATIONS`] observations.
+    TooManyObservations,
+    /// Fewer than two observations (the rotation is undetermined).
+    TooFewObservations,
+    /// Measurement `i` has a non-finite bearing or a range outside `(0, MAX_RANGE]`.
+    InvalidObservation(u8),
+    /// The initial pose is not finite.
+    InvalidPose,
+    /// A parameter is out of range (non-finite, negative, or an empty fraction).
+    InvalidParams,
+}
+
+impl core::fmt::Display for RegistrationError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            RegistrationError::TooManyObservations => {
+                write!(f, "at most {MAX_OBSERVATIONS} observations")
+            }
+            RegistrationError::TooFewObservations => {
+                write!(f, "registration needs at least 2 observations")
+            }
+            RegistrationError::InvalidObservation(i) => {
+                write!(f, "observation {i} has a bad bearing or range")
+            }
+            RegistrationError::InvalidPose => write!(f, "initial pose is not finite"),
+            RegistrationError::InvalidParams => write!(f, "registration parameter out of range"),
+        }
+    }
+}
+
+/// One EDM measurement in the scene frame.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Measurement {
+    /// Encoder bearing `β` (rad, scene frame).
+    pub bearing: f32,
+    /// Measured range `r` (m).
+    pub range: f32,
+}
+
+impl Measurement {
+    /// A measurement `(β, r)`.
+    pub fn new(bearing: f32, range: f32) -> Self {
+        Measurement { bearing, range }
+    }
+
+    /// The scene point `r·unit(β)`.
+    pub fn scene_point(&self) -> Vec2 {
+        unit(self.bearing) * self.range
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct ObsPoint {
+    /// Scene point.
+    s: Vec2,
+    /// Unit ray direction in the scene frame.
+    d: Vec2,
+}
+
+/// A validated, fixed-capacity set of observations (scene points and ray directions
+/// precomputed).
+#[derive(Clone, Debug, Default)]
+pub struct Observations {
+    pts: HVec<ObsPoint, MAX_OBSERVATIONS>,
+}
+
+impl Observations {
+    /// An empty set.
+    pub fn new() -> Self {
+        Observations { pts: HVec::new() }
+    }
+
+    /// Validates and collects `obs`.
+    pub fn from_slice(obs: &[Measurement]) -> Result<Self, RegistrationError> {
+        let mut set = Self::new();
+        for o in obs {
+            set.push(*o)?;
+        }
+        Ok(set)
+    }
+
+    /// Adds one measurement.
+    pub fn push(&mut self, o: Measurement) -> Result<(), RegistrationError> {
+        let i = self.pts.len();
+        if i >= MAX_OBSERVATIONS {
+            return Err(RegistrationError::TooManyObservations);
+        }
+        if !(o.bearing.is_finite() && o.range > 0.0 && o.range <= MAX_RANGE) {
+            return Err(RegistrationError::InvalidObservation(i as u8));
+        }
+        let d = unit(o.bearing);
+        // Capacity checked above.
+        let _ = self.pts.push(ObsPoint { s: d * o.range, d });
+        Ok(())
+    }
+
+    /// Number of observations.
+    pub fn len(&self) -> usize {
+        self.pts.len()
+    }
+
+    /// True when there are none.
+    pub fn is_empty(&self) -> bool {
+        self.pts.is_empty()
+    }
+
+    /// Removes all observations.
+    pub fn clear(&mut self) {
+        self.pts.clear();
+    }
+}
+
+/// Parameters of Sparse ICP (Algorithm 4).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IcpParams {
+    /// Largest feasible incidence angle (rad) between the ray and a wall's outward normal.
+    pub max_incidence: f32,
+    /// Weight of a relaxed (constraint-free nearest point) correspondence; feasible pairs
+    /// weigh `cos(incidence)`.
+    pub relaxed_weight: f32,
+    /// Percentile (fraction in (0, 1]) of pair distances kept by outlier rejection.
+    pub keep_fraction: f32,
+    /// Pairs closer than this (m) are never rejected.
+    pub reject_min_distance: f32,
+    /// Outlier rejection never leaves fewer pairs than this (clamped to ≥ 2).
+    pub min_pairs: u8,
+    /// Iteration cap.
+    pub max_iterations: u16,
+    /// Convergence: translation change below this (m) …
+    pub translation_tolerance: f32,
+    /// … and rotation change below this (rad).
+    pub rotation_tolerance: f32,
+    /// Keep the initial heading and solve the translation only (orientation known, K = 1).
+    pub fixed_heading: bool,
+}
+
+impl Default for IcpParams {
+    fn default() -> Self {
+        IcpParams {
+            max_incidence: 80.0 * core::f32::consts::PI / 180.0,
+            relaxed_weight: 0.1,
+            keep_fraction: 0.8,
+            reject_min_distance: 0.05,
+            min_pairs: 3,
+            max_iterations: 100,
+            translation_tolerance: 1e-5,
+            rotation_tolerance: 1e-6,
+            fixed_heading: false,
+        }
+    }
+}
+
+impl IcpParams {
+    fn validate(&self) -> Result<(), RegistrationError> {
+        let ok = self.max_incidence.is_finite()
+            && self.max_incidence > 0.0
+            && self.relaxed_weight.is_finite()
+            && self.relaxed_weight > 0.0
+            && self.keep_fraction > 0.0
+            && self.keep_fraction <= 1.0
+            && self.reject_min_distance >= 0.0
+            && self.reject_min_distance.is_finite()
+            && self.translation_tolerance >= 0.0
+            && self.rotation_tolerance >= 0.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(RegistrationError::InvalidParams)
+        }
+    }
+}
+
+/// Parameters of the annealed sparse registration (Algorithm 3).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AnnealParams {
+    /// The inner Sparse ICP.
+    pub icp: IcpParams,
+    /// Perturbations `M` drawn per round (besides the unperturbed estimate).
+    pub perturbations: u8,
+    /// Round cap.
+    pub max_rounds: u16,
+    /// Stop after this many consecutive rounds without improvement of `E`.
+    pub patience: u8,
+    /// Stop once `E` is at most this (m).
+    pub min_error: f32,
+    /// `σ_t = translation_gain·√E` (√m).
+    pub translation_gain: f32,
+    /// `σ_θ = rotation_gain·√E` (rad/√m); ignored with a fixed heading.
+    pub rotation_gain: f32,
+    /// Cap of `σ_t` (m).
+    pub max_sigma_translation: f32,
+    /// Cap of `σ_θ` (rad).
+    pub max_sigma_rotation: f32,
+    /// PRNG seed.
+    pub seed: u64,
+}
+
+impl Default for AnnealParams {
+    fn default() -> Self {
+        AnnealParams {
+            icp: IcpParams::default(),
+            perturbations: 8,
+            max_rounds: 20,
+            patience: 4,
+            min_error: 1e-5,
+            translation_gain: 0.5,
+            rotation_gain: 0.3,
+            max_sigma_translation: 0.5,
+            max_sigma_rotation: 0.3,
+            seed: 0x5eed,
+        }
+    }
+}
+
+/// Result of a registration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Registration {
+    /// Refined AgentPose (scene→model).
+    pub pose: Pose2,
+    /// Registration error `E` at `pose`: weighted RMS of the inlier residuals (m).
+    pub error: f32,
+    /// Pairs surviving outlier rejection at `pose`.
+    pub inliers: u16,
+    /// Of all pairs at `pose`, how many had no feasible wall (relaxed correspondences).
+    pub relaxed: u16,
+    /// ICP iterations run (summed over rounds for the annealed registration).
+    pub iterations: u16,
+    /// Annealing rounds run (0 for plain Sparse ICP).
+    pub rounds: u16,
+    /// ICP: stopped on the pose-change test (not the cap). Annealing: stopped on
+    /// patience or `min_error` (not the round cap).
+    pub converged: bool,
+}
+
+impl Registration {
+    /// The registration `T = pose⁻¹` (model→scene).
+    pub fn model_to_scene(&self) -> Pose2 {
+        self.pose.inverse()
+    }
+}
+
+/// `E(P)` and counts at one pose.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ErrorSummary {
+    /// Weighted RMS of the inlier residuals (m).
+    pub error: f32,
+    /// Pairs kept by outlier rejection.
+    pub inliers: u16,
+    /// Pairs with relaxed (constraint-free) correspondences.
+    pub relaxed: u16,
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Pair {
+    /// Correspondent on the model (model frame).
+    m: Vec2,
+    /// Measurement in the scene frame.
+    s: Vec2,
+    dist: f32,
+    weight: f32,
+    relaxed: bool,
+    inlier: bool,
+}
+
+type Pairs = HVec<Pair, MAX_OBSERVATIONS>;
+
+/// Correspondence for one observation at AgentPose `pose`: the nearest point on a feasible
+/// wall (facing the ray, incidence within `cos_max`, visible from the instrument), else the
+/// plain nearest point with weight `relaxed_w`.
+fn correspond(plan: &FloorPlan, o: &ObsPoint, pose: &Pose2, cos_max: f32, relaxed_w: f32) -> Pair {
+    let origin = pose.translation(); // the instrument, in the model frame
+    let p = pose.transform(o.s);
+    let d = pose.rotate_dir(o.d);
+    let n = plan.len();
+    let mut any: Option<(Vec2, f32)> = None;
+    // Walls found hidden from the instrument (a plan has at most 64 walls).
+    let mut hidden: u64 = 0;
+    loop {
+        let mut best: Option<(usize, Vec2, f32, f32)> = None;
+        for i in 0..n {
+            let (a, b) = plan.wall(i);
+            let q = closest_on_segment(p, a, b);
+            let dist = length(p - q);
+            if any.is_none_or(|(_, e)| dist < e) {
+                any = Some((q, dist));
+            }
+            if hidden & (1u64 << i) != 0 {
+                continue;
+            }
+            let nrm = plan.outward_normal(i);
+            let c = d.x * nrm.x + d.y * nrm.y;
+            if c > 0.0 && c >= cos_max && best.is_none_or(|(_, _, e, _)| dist < e) {
+                best = Some((i, q, dist, c));
+            }
+        }
+        match best {
+            Some((i, m, dist, c)) => {
+                if plan.visible(origin, m, VISIBILITY_TOLERANCE) {
+                    return Pair {
+                        m,
+                        s: o.s,
+                        dist,
+                        weight: c,
+                        relaxed: false,
+                        inlier: true,
+                    };
+                }
+                hidden |= 1u64 << i;
+            }
+            None => break,
+        }
+    }
+    match any {
+        Some((m, dist)) => Pair {
+            m,
+            s: o.s,
+            dist,
+            weight: relaxed_w,
+            relaxed: true,
+            inlier: true,
+        },
+        // A valid plan has at least three walls.
+        None => Pair {
+            m: p,
+            s: o.s,
+            dist: 0.0,
+            weight: 0.0,
+            relaxed: true,
+            inlier: false,
+        },
+    }
+}
+
+/// Correspondences + outlier rejection at `pose`; returns `E` and counts.
+fn match_pairs(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    params: &IcpParams,
+    pairs: &mut Pairs,
+) -> ErrorSummary {
+    pairs.clear();
+    let cos_max = cos(params.max_incidence);
+    for o in &obs.pts {
+        // Same capacity as the observation set.
+        let _ = pairs.push(correspond(plan, o, pose, cos_max, params.relaxed_weight));
+    }
+    let n = pairs.len();
+    // Percentile threshold on the distances.
+    let mut sorted = [0.0f32; MAX_OBSERVATIONS];
+    for (k, p) in pairs.iter().enumerate() {
+        sorted[k] = p.dist;
+    }
+    let sorted = &mut sorted[..n];
+    sorted.sort_unstable_by(|a, b| a.total_cmp(b));
+    let keep = {
+        let k = (params.keep_fraction * n as f32 + 0.999) as usize;
+        k.max(params.min_pairs.max(2) as usize).min(n)
+    };
+    let threshold = if keep == 0 { 0.0 } else { sorted[keep - 1] };
+    let (mut sw, mut swd2) = (0.0f32, 0.0f32);
+    let (mut inliers, mut relaxed) = (0u16, 0u16);
+    for p in pairs.iter_mut() {
+        p.inlier = p.weight > 0.0 && (p.dist <= threshold || p.dist <= params.reject_min_distance);
+        relaxed += p.relaxed as u16;
+        if p.inlier {
+            inliers += 1;
+            sw += p.weight;
+            swd2 += p.weight * p.dist * p.dist;
+        }
+    }
+    let error = if sw > 0.0 {
+        sqrt(swd2 / sw)
+    } else {
+        f32::INFINITY
+    };
+    ErrorSummary {
+        error,
+        inliers,
+        relaxed,
+    }
+}
+
+/// Equation 6 on the inlier pairs: the model→scene `T`. With `fixed` the rotation is
+/// `fixed.theta` and only the translation is solved.
+fn solve(pairs: &Pairs, fixed: Option<f32>) -> Option<Pose2> {
+    let (mut sw, mut mbar, mut obar) = (0.0f32, v2(0.0, 0.0), v2(0.0, 0.0));
+    for p in pairs.iter().filter(|p| p.inlier) {
+        sw += p.weight;
+        mbar += p.m * p.weight;
+        obar += p.s * p.weight;
+    }
+    if sw <= 0.0 {
+        return None;
+    }
+    mbar /= sw;
+    obar /= sw;
+    let theta = match fixed {
+        Some(t) => t,
+        None => {
+            // Γ = (M − m̄)ᵀ W (O − ō); only Γ01 − Γ10 and tr Γ are needed.
+            let (mut cross_sum, mut dot_sum, mut spread) = (0.0f32, 0.0f32, 0.0f32);
+            for p in pairs.iter().filter(|p| p.inlier) {
+                let (m, o) = (p.m - mbar, p.s - obar);
+                cross_sum += p.weight * (m.x * o.y - m.y * o.x);
+                dot_sum += p.weight * (m.x * o.x + m.y * o.y);
+                spread += p.weight * (m.x * m.x + m.y * m.y);
+            }
+            if spread <= 1e-12 * sw {
+                return None;
+            }
+            atan2(cross_sum, dot_sum)
+        }
+    };
+    let t = obar - rotate(mbar, theta);
+    Some(Pose2::new(t.x, t.y, theta))
+}
+
+fn check_inputs(
+    obs: &Observations,
+    initial: &Pose2,
+    params: &IcpParams,
+) -> Result<(), RegistrationError> {
+    params.validate()?;
+    if obs.len() < 2 {
+        return Err(RegistrationError::TooFewObservations);
+    }
+    if !initial.is_finite() {
+        return Err(RegistrationError::InvalidPose);
+    }
+    Ok(())
+}
+
+/// The registration error `E` at AgentPose `pose` (correspondences, rejection, weighted RMS).
+pub fn registration_error(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    params: &IcpParams,
+) -> Result<ErrorSummary, RegistrationError> {
+    check_inputs(obs, pose, params)?;
+    let mut pairs = Pairs::new();
+    Ok(match_pairs(plan, obs, pose, params, &mut pairs))
+}
+
+/// Sparse ICP (Algorithm 4) from the AgentPose `initial` against the centred `plan`.
+pub fn sparse_icp(
+    plan: &FloorPlan,
+    obs: &Observations,
+    initial: &Pose2,
+    params: &IcpParams,
+) -> Result<Registration, RegistrationError> {
+    check_inputs(obs, initial, params)?;
+    let mut pairs = Pairs::new();
+    Ok(icp_inner(plan, obs, initial, params, &mut pairs))
+}
+
+fn icp_inner(
+    plan: &FloorPlan,
+    obs: &Observations,
+    initial: &Pose2,
+    params: &IcpParams,
+    pairs: &mut Pairs,
+) -> Registration {
+    let fixed = if params.fixed_heading {
+        Some(wrap_angle(-initial.theta))
+    } else {
+        None
+    };
+    let mut pose = *initial;
+    let mut summary = match_pairs(plan, obs, &pose, params, pairs);
+    let mut best = (pose, summary);
+    let mut iterations = 0u16;
+    let mut converged = false;
+    while iterations < params.max_iterations {
+        iterations += 1;
+        let Some(t) = solve(pairs, fixed) else {
+            break;
+        };
+        let next = t.inverse();
+        if !next.is_finite() {
+            break;
+        }
+        let dt = length(next.translation() - pose.translation());
+        let dth = abs(wrap_angle(next.theta - pose.theta));
+        pose = next;
+        summary = match_pairs(plan, obs, &pose, params, pairs);
+        if summary.error <= best.1.error {
+            best = (pose, summary);
+        }
+        if dt < params.translation_tolerance && dth < params.rotation_tolerance {
+            converged = true;
+            break;
+        }
+    }
+    let (pose, s) = best;
+    Registration {
+        pose,
+        error: s.error,
+        inliers: s.inliers,
+        relaxed: s.relaxed,
+        iterations,
+        rounds: 0,
+        converged,
+    }
+}
+
+/// Standard-normal samples from a seeded [`Pcg32`] via Box–Muller in f32 (libm), identical
+/// on every target.
+#[derive(Clone, Debug)]
+pub struct GaussianRng {
+    rng: Pcg32,
+    spare: Option<f32>,
+}
+
+impl GaussianRng {
+    /// Seeds the generator.
+    pub fn new(seed: u64) -> Self {
+        GaussianRng {
+            rng: Pcg32::seed_from_u64(seed),
+            spare: None,
+        }
+    }
+
+    /// Uniform in the open interval (0, 1) with 24-bit resolution.
+    pub fn uniform(&mut self) -> f32 {
+        ((self.rng.next_u32() >> 8) as f32 + 0.5) * (1.0 / 16_777_216.0)
+    }
+
+    /// One N(0, 1) sample.
+    pub fn normal(&mut self) -> f32 {
+        if let Some(z) = self.spare.take() {
+            return z;
+        }
+        let (u1, u2) = (self.uniform(), self.uniform());
+        let r = sqrt(-2.0 * ln(u1));
+        let a = TAU * u2;
+        self.spare = Some(r * sin(a));
+        r * cos(a)
+    }
+}
+
+/// Annealed sparse registration (Algorithm 3) from the AgentPose `initial` (the coarse
+/// localizer's estimate) against the centred `plan`.
+pub fn register(
+    plan: &FloorPlan,
+    obs: &Observations,
+    initial: &Pose2,
+    params: &AnnealParams,
+) -> Result<Registration, RegistrationError> {
+    let icp = &params.icp;
+    check_inputs(obs, initial, icp)?;
+    let gains_ok = [
+        params.min_error,
+        params.translation_gain,
+        params.rotation_gain,
+        params.max_sigma_translation,
+        params.max_sigma_rotation,
+    ]
+    .iter()
+    .all(|g| g.is_finite() && *g >= 0.0);
+    if !gains_ok {
+        return Err(RegistrationError::InvalidParams);
+    }
+    let mut rng = GaussianRng::new(params.seed);
+    let mut pairs = Pairs::new();
+    let mut pose = *initial;
+    let mut summary = match_pairs(plan, obs, &pose, icp, &mut pairs);
+    let sigmas = |e: f32| {
+        let r = if e.is_finite() { sqrt(e) } else { 1.0 };
+        let st = (params.translation_gain * r).min(params.max_sigma_translation);
+        let sr = if icp.fixed_heading {
+            0.0
+        } else {
+            (params.rotation_gain * r).min(params.max_sigma_rotation)
+        };
+        (st, sr)
+    };
+    let (mut sigma_t, mut sigma_r) = sigmas(summary.error);
+    let mut iterations = 0u16;
+    let mut rounds = 0u16;
+    let mut stale = 0u8;
+    let mut converged = false;
+    while rounds < params.max_rounds {
+        if summary.error <= params.min_error || stale >= params.patience {
+            converged = true;
+            break;
+        }
+        rounds += 1;
+        // Perturbations j = 1..=M around the estimate; j = 0 is the estimate itself.
+        let mut pick = (pose, summary);
+        for _ in 0..params.perturbations {
+            let cand = Pose2::new(
+                pose.x + sigma_t * rng.normal(),
+                pose.y + sigma_t * rng.normal(),
+                pose.theta + sigma_r * rng.normal(),
+            );
+            let s = match_pairs(plan, obs, &cand, icp, &mut pairs);
+            if s.error < pick.1.error {
+                pick = (cand, s);
+            }
+        }
+        let refined = icp_inner(plan, obs, &pick.0, icp, &mut pairs);
+        iterations = iterations.saturating_add(refined.iterations);
+        let next = if refined.error < pick.1.error {
+            (
+                refined.pose,
+                ErrorSummary {
+                    error: refined.error,
+                    inliers: refined.inliers,
+                    relaxed: refined.relaxed,
+                },
+            )
+        } else {
+            pick
+        };
+        // Improvement test with a small relative margin so float jitter does not reset it.
+        if next.1.error < summary.error * (1.0 - 1e-4) {
+            stale = 0;
+        } else {
+            stale = stale.saturating_add(1);
+        }
+        if next.1.error <= summary.error {
+            pose = next.0;
+            summary = next.1;
+        }
+        (sigma_t, sigma_r) = sigmas(summary.error);
+    }
+    if !converged && (summary.error <= params.min_error || stale >= params.patience) {
+        converged = true;
+    }
+    Ok(Registration {
+        pose,
+        error: summary.error,
+        inliers: summary.inliers,
+        relaxed: summary.relaxed,
+        iterations,
+        rounds,
+        converged,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::floorplan::MAX_VERTICES;
+    use crate::math::wrap_positive;
+    use core::f32::consts::PI;
+    use proptest::prelude::*;
+
+    fn plan(pts: &[(f32, f32)]) -> FloorPlan {
+        let v: HVec<Vec2, MAX_VERTICES> = pts.iter().map(|&(x, y)| v2(x, y)).collect();
+        FloorPlan::new(&v).unwrap().centered()
+    }
+
+    /// Asymmetric test rooms (model frame, centred).
+    fn rooms() -> [FloorPlan; 3] {
+        [
+            // L-room 6 x 4.
+            plan(&[
+                (0.0, 0.0),
+                (6.0, 0.0),
+                (6.0, 2.0),
+                (3.0, 2.0),
+                (3.0, 4.0),
+                (0.0, 4.0),
+            ]),
+            // Irregular heptagon with a chamfer.
+            plan(&[
+                (0.0, 0.0),
+                (7.0, 0.0),
+                (7.0, 1.5),
+                (5.0, 3.5),
+                (2.0, 3.5),
+                (2.0, 5.0),
+                (0.0, 5.0),
+            ]),
+            // Skewed quadrilateral.
+            plan(&[(0.0, 0.0), (5.5, 0.5), (6.0, 4.0), (0.5, 3.0)]),
+        ]
+    }
+
+    /// Simulated measurements from AgentPose `truth` at `bearings`, with Gaussian range
+    /// noise `sigma` and, for every index in `outliers`, a range cut to 40 % (an
+    /// obstruction in front of the wall).
+    fn measure(
+        p: &FloorPlan,
+        truth: &Pose2,
+        bearings: &[f32],
+        sigma: f32,
+        outliers: &[usize],
+        rng: &mut GaussianRng,
+    ) -> Observations {
+        let mut obs = Observations::new();
+        for (j, &b) in bearings.iter().enumerate() {
+            let hit = p
+                .ray_cast(truth.translation(), unit(truth.theta + b))
+                .expect("inside the room");
+            let mut r = hit.range + sigma * rng.normal();
+            if outliers.contains(&j) {
+                r = 0.4 * hit.range;
+            }
+            obs.push(Measurement::new(b, r)).unwrap();
+        }
+        obs
+    }
+
+    fn evenly(n: usize, start: f32) -> HVec<f32, MAX_OBSERVATIONS> {
+        (0..n)
+            .map(|i| wrap_angle(start + TAU * i as f32 / n as f32))
+            .collect()
+    }
+
+    fn pos_err(a: &Pose2, b: &Pose2) -> f32 {
+        length(a.translation() - b.translation())
+    }
+
+    fn ang_err(a: &Pose2, b: &Pose2) -> f32 {
+        abs(wrap_angle(a.theta - b.theta))
+    }
+
+    /// A point inside `p`, at least `margin` from every wall.
+    fn interior(p: &FloorPlan, rng: &mut GaussianRng, margin: f32) -> Vec2 {
+        let (lo, hi) = p.bounds();
+        loop {
+            let q = v2(
+                lo.x + (hi.x - lo.x) * rng.uniform(),
+                lo.y + (hi.y - lo.y) * rng.uniform(),
+            );
+            if p.contains(q) && p.nearest_point(q).distance > margin {
+                return q;
+            }
+        }
+    }
+
+    #[test]
+    fn equation_6_recovers_an_exact_transform() {
+        let t = Pose2::new(0.7, -1.2, 0.9);
+        let mut pairs = Pairs::new();
+        for (k, m) in [v2(1.0, 2.0), v2(-3.0, 0.5), v2(2.0, -1.0), v2(0.0, 0.1)]
+            .iter()
+            .enumerate()
+        {
+            pairs
+                .push(Pair {
+                    m: *m,
+                    s: t.transform(*m),
+                    dist: 0.0,
+                    weight: 0.2 + k as f32,
+                    relaxed: false,
+                    inlier: true,
+                })
+                .unwrap();
+        }
+        let got = solve(&pairs, None).unwrap();
+        assert!(
+            pos_err(&got, &t) < 1e-5 && ang_err(&got, &t) < 1e-6,
+            "{got:?}"
+        );
+        // Fixed heading: translation only.
+        let got = solve(&pairs, Some(0.9)).unwrap();
+        assert!(pos_err(&got, &t) < 1e-5 && got.theta == Pose2::new(0.0, 0.0, 0.9).theta);
+        // A rotation beyond ±π/2 (arctan would fold it; atan2 must not).
+        let t = Pose2::new(0.1, 0.2, 2.8);
+        for p in pairs.iter_mut() {
+            p.s = t.transform(p.m);
+        }
+        let got = solve(&pairs, None).unwrap();
+        assert!(ang_err(&got, &t) < 1e-5, "{got:?}");
+    }
+
+    #[test]
+    fn correspondences_respect_the_incidence_constraints() {
+        // Rectangle 4 x 2 centred: x in [-2, 2], y in [-1, 1].
+        let r = plan(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (0.0, 2.0)]);
+        let params = IcpParams::default();
+        let cos_max = cos(params.max_incidence);
+        // Measurement just outside the right wall but the ray points left (-x): the right
+        // wall faces away from the ray; the constrained match is the left wall.
+        let o = ObsPoint {
+            s: v2(2.05, 0.0),
+            d: v2(-1.0, 0.0),
+        };
+        let pr = correspond(&r, &o, &Pose2::IDENTITY, cos_max, params.relaxed_weight);
+        assert!(
+            !pr.relaxed && (pr.m - v2(-2.0, 0.0)).norm() < 1e-6,
+            "{pr:?}"
+        );
+        assert!((pr.weight - 1.0).abs() < 1e-6);
+        // Ray along +x hitting the right wall at 60°: weight cos 60°.
+        let o = ObsPoint {
+            s: v2(1.9, 0.3),
+            d: unit(PI / 3.0),
+        };
+        let pr = correspond(&r, &o, &Pose2::IDENTITY, cos_max, params.relaxed_weight);
+        assert!(!pr.relaxed && (pr.m - v2(2.0, 0.3)).norm() < 1e-6, "{pr:?}");
+        assert!((pr.weight - 0.5).abs() < 1e-5);
+        // Instrument outside the room at (10, 0) looking at -x, observation mapped to
+        // (1.9, 0): the right wall faces away from the ray and the left wall is hidden
+        // behind it, top and bottom are at 90°: relaxed to the nearest point (2, 0).
+        let pose = Pose2::new(10.0, 0.0, 0.0);
+        let o = ObsPoint {
+            s: v2(-8.1, 0.0),
+            d: v2(-1.0, 0.0),
+        };
+        let pr = correspond(&r, &o, &pose, cos_max, params.relaxed_weight);
+        assert!(pr.relaxed && pr.weight == params.relaxed_weight, "{pr:?}");
+        assert!((pr.m - v2(2.0, 0.0)).norm() < 1e-5 && (pr.dist - 0.1).abs() < 1e-5);
+        // L-room, instrument in the lower arm: the nearest wall to the observation is the
+        // hidden upper-arm wall, the visible constrained match is the far one.
+        let l = plan(&[
+            (0.0, 0.0),
+            (6.0, 0.0),
+            (6.0, 2.0),
+            (3.0, 2.0),
+            (3.0, 4.0),
+            (0.0, 4.0),
+        ]);
+        let c = FloorPlan::new(&[
+            v2(0.0, 0.0),
+            v2(6.0, 0.0),
+            v2(6.0, 2.0),
+            v2(3.0, 2.0),
+            v2(3.0, 4.0),
+            v2(0.0, 4.0),
+        ])
+        .unwrap()
+        .perimeter_centroid();
+        // Original coordinates: instrument at (5, 1) in the lower arm, observation at
+        // (2.5, 3.9) near the top wall of the upper arm. The top wall (0.1 away) faces the
+        // ray but is hidden behind the notch wall y = 2, and so is the left wall x = 0;
+        // the wall x = 3 faces away. The nearest feasible *visible* point is the reflex
+        // corner (3, 2) on the notch wall.
+        let inst = v2(5.0, 1.0) - c;
+        let obs_pt = v2(2.5, 3.9) - c;
+        let dir = (obs_pt - inst) / length(obs_pt - inst);
+        let pose = Pose2::new(inst.x, inst.y, 0.0);
+        let o = ObsPoint {
+            s: obs_pt - inst,
+            d: dir,
+        };
+        let pr = correspond(&l, &o, &pose, cos_max, params.relaxed_weight);
+        assert!(!pr.relaxed, "{pr:?}");
+        assert!((pr.m - (v2(3.0, 2.0) - c)).norm() < 1e-4, "{pr:?}");
+        // Seen from the upper arm instead, the top wall is visible and matched.
+        let inst = v2(1.0, 3.0) - c;
+        let dir = (obs_pt - inst) / length(obs_pt - inst);
+        let pose = Pose2::new(inst.x, inst.y, 0.0);
+        let o = ObsPoint {
+            s: obs_pt - inst,
+            d: dir,
+        };
+        let pr = correspond(&l, &o, &pose, cos_max, params.relaxed_weight);
+        assert!(
+            !pr.relaxed && (pr.m - (v2(2.5, 4.0) - c)).norm() < 1e-4,
+            "{pr:?}"
+        );
+    }
+
+    #[test]
+    fn icp_recovers_perturbed_poses_noise_free() {
+        let mut rng = GaussianRng::new(11);
+        for p in rooms() {
+            for _ in 0..10 {
+                let a = interior(&p, &mut rng, 0.4);
+                let truth = Pose2::new(a.x, a.y, TAU * rng.uniform());
+                let obs = measure(&p, &truth, &evenly(12, 0.1), 0.0, &[], &mut rng);
+                let init = Pose2::new(
+                    truth.x + 0.1 * rng.normal(),
+                    truth.y + 0.1 * rng.normal(),
+                    truth.theta + 0.05 * rng.normal(),
+                );
+                let params = IcpParams {
+                    max_iterations: 300,
+                    ..IcpParams::default()
+                };
+                let reg = sparse_icp(&p, &obs, &init, &params).unwrap();
+                assert!(
+                    pos_err(&reg.pose, &truth) < 2e-3 && ang_err(&reg.pose, &truth) < 1e-3,
+                    "truth {truth:?} init {init:?} got {reg:?}"
+                );
+                assert!(reg.error < 1e-3, "{reg:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn icp_with_centimetre_noise() {
+        let mut rng = GaussianRng::new(12);
+        let mut errs: HVec<f32, 64> = HVec::new();
+        for p in rooms() {
+            for _ in 0..20 {
+                let a = interior(&p, &mut rng, 0.4);
+                let truth = Pose2::new(a.x, a.y, TAU * rng.uniform());
+                let obs = measure(&p, &truth, &evenly(24, 0.2), 0.01, &[], &mut rng);
+                let init = Pose2::new(truth.x + 0.1, truth.y - 0.08, truth.theta + 0.04);
+                let reg = sparse_icp(&p, &obs, &init, &IcpParams::default()).unwrap();
+                errs.push(pos_err(&reg.pose, &truth)).unwrap();
+                assert!(reg.error < 0.03, "{reg:?}");
+            }
+        }
+        errs.sort_unstable_by(|a, b| a.total_cmp(b));
+        let median = errs[errs.len() / 2];
+        assert!(median < 0.01, "median {median}, all {errs:?}");
+        assert!(errs[errs.len() - 1] < 0.05, "{errs:?}");
+    }
+
+    #[test]
+    fn outliers_are_rejected() {
+        let mut rng = GaussianRng::new(13);
+        let p = &rooms()[1];
+        let truth = Pose2::new(-0.5, -0.4, 1.0);
+        let obs = measure(p, &truth, &evenly(10, 0.3), 0.0, &[3], &mut rng);
+        let init = Pose2::new(-0.4, -0.45, 1.03);
+        let reg = sparse_icp(p, &obs, &init, &IcpParams::default()).unwrap();
+        assert!(pos_err(&reg.pose, &truth) < 1e-3, "{reg:?}");
+        assert_eq!(reg.inliers, 9, "{reg:?}");
+        // Without rejection the outlier drags the estimate.
+        let no_reject = IcpParams {
+            keep_fraction: 1.0,
+            ..IcpParams::default()
+        };
+        let bad = sparse_icp(p, &obs, &init, &no_reject).unwrap();
+        assert!(pos_err(&bad.pose, &truth) > 5e-3, "{bad:?}");
+    }
+
+    #[test]
+    fn fixed_heading_keeps_the_heading() {
+        let mut rng = GaussianRng::new(14);
+        let p = &rooms()[0];
+        let truth = Pose2::new(-1.2, -0.6, 0.4);
+        let obs = measure(p, &truth, &evenly(6, 0.0), 0.0, &[], &mut rng);
+        let init = Pose2::new(-1.0, -0.5, 0.4);
+        let params = IcpParams {
+            fixed_heading: true,
+            max_iterations: 300,
+            ..IcpParams::default()
+        };
+        let reg = sparse_icp(p, &obs, &init, &params).unwrap();
+        assert_eq!(reg.pose.theta, init.theta);
+        assert!(pos_err(&reg.pose, &truth) < 1e-3, "{reg:?}");
+    }
+
+    #[test]
+    fn annealing_from_coarse_pose_with_six_measurements() {
+        // One grid cell (~extent / 30 ≈ 0.2 m) and half a 36° rotation bin off, 6
+        // measurements at σ = 1 cm, the median position error must be < 2 cm.
+        let mut rng = GaussianRng::new(15);
+        let mut errs: HVec<f32, 64> = HVec::new();
+        for p in rooms() {
+            for _ in 0..15 {
+                let a = interior(&p, &mut rng, 0.4);
+                let truth = Pose2::new(a.x, a.y, TAU * rng.uniform());
+                let obs = measure(&p, &truth, &evenly(6, rng.uniform()), 0.01, &[], &mut rng);
+                let init = Pose2::new(
+                    truth.x + 0.2 * (rng.uniform() - 0.5),
+                    truth.y + 0.2 * (rng.uniform() - 0.5),
+                    truth.theta + (PI / 5.0) * (rng.uniform() - 0.5),
+                );
+                let reg = register(&p, &obs, &init, &AnnealParams::default()).unwrap();
+                errs.push(pos_err(&reg.pose, &truth)).unwrap();
+            }
+        }
+        errs.sort_unstable_by(|a, b| a.total_cmp(b));
+        let median = errs[errs.len() / 2];
+        assert!(median < 0.02, "median {median}: {errs:?}");
+    }
+
+    #[test]
+    fn registration_is_deterministic_for_a_seed() {
+        let mut rng = GaussianRng::new(16);
+        let p = &rooms()[1];
+        let truth = Pose2::new(0.3, -0.2, 2.0);
+        let obs = measure(p, &truth, &evenly(6, 0.4), 0.01, &[2], &mut rng);
+        let init = Pose2::new(0.45, -0.05, 2.2);
+        let params = AnnealParams {
+            seed: 99,
+            ..AnnealParams::default()
+        };
+        let a = register(p, &obs, &init, &params).unwrap();
+        let b = register(p, &obs, &init, &params).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(a.pose.x.to_bits(), b.pose.x.to_bits());
+        // The Gaussian stream itself is reproducible and standard-normal-ish.
+        let mut g1 = GaussianRng::new(7);
+        let mut g2 = GaussianRng::new(7);
+        let (mut s, mut s2) = (0.0f32, 0.0f32);
+        for _ in 0..20_000 {
+            let z = g1.normal();
+            assert_eq!(z.to_bits(), g2.normal().to_bits());
+            s += z;
+            s2 += z * z;
+        }
+        let (mean, var) = (s / 20_000.0, s2 / 20_000.0);
+        assert!(abs(mean) < 0.03 && abs(var - 1.0) < 0.05, "{mean} {var}");
+    }
+
+    #[test]
+    fn typed_errors_on_bad_input() {
+        let p = &rooms()[0];
+        let mut obs = Observations::new();
+        assert_eq!(
+            obs.push(Measurement::new(0.0, -1.0)),
+            Err(RegistrationError::InvalidObservation(0))
+        );
+        assert_eq!(
+            obs.push(Measurement::new(f32::NAN, 1.0)),
+            Err(RegistrationError::InvalidObservation(0))
+        );
+        obs.push(Measurement::new(0.0, 1.0)).unwrap();
+        let id = Pose2::IDENTITY;
+        assert_eq!(
+            sparse_icp(p, &obs, &id, &IcpParams::default()),
+            Err(RegistrationError::TooFewObservations)
+        );
+        obs.push(Measurement::new(1.0, 1.0)).unwrap();
+        let nan = Pose2 {
+            x: f32::NAN,
+            y: 0.0,
+            theta: 0.0,
+        };
+        assert_eq!(
+            register(p, &obs, &nan, &AnnealParams::default()),
+            Err(RegistrationError::InvalidPose)
+        );
+        let bad = IcpParams {
+            keep_fraction: 0.0,
+            ..IcpParams::default()
+        };
+        assert_eq!(
+            sparse_icp(p, &obs, &id, &bad),
+            Err(RegistrationError::InvalidParams)
+        );
+        let many = [Measurement::new(0.0, 1.0); MAX_OBSERVATIONS + 1];
+        assert_eq!(
+            Observations::from_slice(&many).err(),
+            Some(RegistrationError::TooManyObservations)
+        );
+        // Garbage that is valid input never panics and yields a finite pose.
+        let reg = register(
+            p,
+            &obs,
+            &Pose2::new(50.0, -50.0, 1.0),
+            &AnnealParams::default(),
+        );
+        assert!(reg.unwrap().pose.is_finite());
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+        /// Noise-free: ICP from a small perturbation recovers the pose on every room.
+        #[test]
+        fn icp_recovers_small_perturbations(
+            pick in 0usize..3, seed in 0u64..10_000, h in 0.0f32..6.0,
+            dx in -0.08f32..0.08, dy in -0.08f32..0.08, dh in -0.04f32..0.04,
+        ) {
+            let p = &rooms()[pick];
+            let mut rng = GaussianRng::new(seed);
+            let a = interior(p, &mut rng, 0.5);
+            let truth = Pose2::new(a.x, a.y, h);
+            let obs = measure(p, &truth, &evenly(16, wrap_positive(h)), 0.0, &[], &mut rng);
+            let init = Pose2::new(a.x + dx, a.y + dy, h + dh);
+            let params = IcpParams { max_iterations: 400, ..IcpParams::default() };
+            let reg = sparse_icp(p, &obs, &init, &params).unwrap();
+            prop_assert!(pos_err(&reg.pose, &truth) < 2e-3, "{:?} {:?}", truth, reg);
+            prop_assert!(ang_err(&reg.pose, &truth) < 1e-3);
+        }
+    }
+}
