@@ -238,12 +238,13 @@ pub fn fault_suite<T: Read + Write>(c: &mut Client<T>) {
         "{r:?}"
     );
     // 7. The host disappears mid-episode; a new host says Hello and runs a full episode.
-    let mut fresh = Client::new(c.get_mut());
-    fresh.hello().expect("new session after abandoned episode");
-    let st = fresh.status().unwrap();
-    assert_eq!(st.phase, Phase::Ready);
-    check_episodes(&mut fresh, 1, 1);
-    drop(fresh);
+    {
+        let mut fresh = Client::new(c.get_mut());
+        fresh.hello().expect("new session after abandoned episode");
+        let st = fresh.status().unwrap();
+        assert_eq!(st.phase, Phase::Ready);
+        check_episodes(&mut fresh, 1, 1);
+    }
     // The old client object continues with its own id counter: re-open.
     c.hello().expect("hello again");
     let st = c.status().unwrap();
