@@ -17,6 +17,9 @@
 //! | [`agents`] | 3.1, 4.2 (actions, costs, the Table-3 baseline agents) |
 //! | [`localization`] | 3.2 (fixed-grid GHT localization: R-table, Algorithms 1–2, belief analysis, staging) |
 //! | [`episode`] | 3.1, 4.2 (episode bookkeeping: encoder bearing, costs, action limit) |
+//! | [`wire`] | host ⇄ instrument serial protocol (`docs/protocol.md`) |
+//! | [`session`] | the device's protocol state machine and episode controller |
+//! | [`instrument`] | sensors/actuators trait, embedded-hal hardware instrument |
 //! | [`registration`] | 3.3 (Sparse ICP, Algorithm 4, equation 6; annealed perturbation, Algorithm 3) |
 //! | [`symmetry`] | 3.4 (edge-chain rotational-symmetry detection, Wolter et al. 1985) |
 //! | [`pose_distance`] | 3.4 (symmetry-aware pose distance, Table 2, equations 7–10) |
@@ -28,11 +31,14 @@ pub mod agents;
 pub mod episode;
 pub mod floorplan;
 pub mod geometry;
+pub mod instrument;
 pub mod localization;
 pub mod math;
 pub mod pose_distance;
 pub mod registration;
+pub mod session;
 pub mod symmetry;
+pub mod wire;
 
 pub use floorplan::{FloorPlan, PlanError, RayHit, MAX_VERTICES};
 pub use geometry::{Pose2, Vec2};

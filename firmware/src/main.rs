@@ -1,21 +1,92 @@
 //! activesense instrument-controller firmware (STM32F405, Cortex-M4F).
 //!
-//! At this stage the firmware boots, exercises the no_std core once (builds and validates
-//! a floor-plan model, casts a ray, runs a baseline agent) and reports the result over
-//! semihosting, then exits through semihosting so that `qemu-system-arm` returns the
-//! status. `cargo xtask qemu-smoke` checks that line. The serial protocol session is
-//! layered on top of this in `session`.
+//! **Boot.** Runs the core self-test (builds and validates a floor-plan, casts a ray, runs
+//! a baseline agent) and prints `activesense-firmware <ver>: core initialised ...` over
+//! semihosting.
+//!
+//! **Modes** (semihosting command line, i.e. QEMU `-semihosting-config ...,arg=smoke` or
+//! `-append smoke`):
+//! * `smoke`: exit with status 0 right after the boot line (`cargo xtask qemu-smoke`).
+//! * default: serve the serial protocol (`docs/protocol.md`,
+//!   [`activesense_core::session`]) on USART1 (QEMU `serial0`) until the host sends
+//!   `Shutdown`; then print `activesense-firmware: shutdown` and exit with status 0.
+//!   The firmware owns the decisions; in simulation the host answers its action requests.
+//!
+//! A panic prints `PANIC: ...` over semihosting and exits with a failure status, so a test
+//! harness sees the failure instead of a hung emulator.
+//!
+//! **Clocks.** SysTick runs from the core clock, assumed to be 168 MHz (QEMU's
+//! netduinoplus2 models SYSCLK at 168 MHz; real hardware needs the PLL set up first,
+//! which this firmware does not do yet). It provides the millisecond clock for the host
+//! silence timeout and the cycle counter for the per-update statistics (under QEMU these
+//! are virtual-time cycles, not real M4F cycles).
 #![no_std]
 #![no_main]
 
+mod usart;
+
 use activesense_core::agents::{AgentKind, BaselineAgent};
 use activesense_core::geometry::{unit, v2};
+use activesense_core::session::{Control, Session, SessionConfig, DEFAULT_TIMEOUT_MS};
 use activesense_core::FloorPlan;
-use cortex_m_rt::entry;
+use core::sync::atomic::{AtomicU32, Ordering};
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hprintln};
+use embedded_io::{Read, ReadReady};
 
-/// Reports a panic over semihosting and exits QEMU with a failure status, so a test
-/// harness sees the failure instead of a hung emulator.
+/// Core clock (Hz) SysTick counts.
+const CORE_HZ: u32 = 168_000_000;
+/// SysTick reload for a 1 ms tick.
+const TICK_RELOAD: u32 = CORE_HZ / 1000 - 1;
+
+static MILLIS: AtomicU32 = AtomicU32::new(0);
+
+#[exception]
+fn SysTick() {
+    MILLIS.fetch_add(1, Ordering::Relaxed);
+}
+
+fn millis() -> u32 {
+    MILLIS.load(Ordering::Relaxed)
+}
+
+/// Core-clock cycles since boot (mod 2^32), from the SysTick count.
+fn cycles() -> u32 {
+    loop {
+        let ms = millis();
+        // SYST_CVR counts down from TICK_RELOAD.
+        // SAFETY: read-only access to the SysTick current-value register.
+        let val = unsafe { (*cortex_m::peripheral::SYST::PTR).cvr.read() } & 0x00FF_FFFF;
+        // A tick between the two reads would pair a new count with an old millisecond.
+        if millis() == ms {
+            return ms
+                .wrapping_mul(TICK_RELOAD + 1)
+                .wrapping_add(TICK_RELOAD.saturating_sub(val));
+        }
+    }
+}
+
+/// USART1's interrupt (IRQ 37) only wakes the core from `wfi`. The line stays high until
+/// DR is read, so the handler masks it in the NVIC; the main loop reads the data and
+/// unmasks it again before the next `wfi`.
+#[exception]
+unsafe fn DefaultHandler(irqn: i16) {
+    if irqn == usart::IRQN {
+        cortex_m::peripheral::NVIC::mask(usart::Usart1Irq);
+    }
+}
+
+const CONFIG: SessionConfig = SessionConfig {
+    firmware: concat!("activesense-fw ", env!("CARGO_PKG_VERSION")),
+    timeout_ms: DEFAULT_TIMEOUT_MS,
+    cycle_clock: Some(cycles),
+};
+
+/// The whole protocol state (frame buffers, plan, measurement log) lives here, not on
+/// the stack.
+static mut SESSION: Session = Session::new(CONFIG);
+
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     hprintln!("PANIC: {}", info);
@@ -24,25 +95,88 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     loop {}
 }
 
+/// True when the semihosting command line contains the word `word`.
+fn cmdline_has(word: &[u8]) -> bool {
+    let mut buf = [0u8; 128];
+    let mut block = [buf.as_mut_ptr() as usize, buf.len() - 1];
+    // SAFETY: SYS_GET_CMDLINE writes at most block[1] bytes into `buf` and updates
+    // block[1] with the length; both outlive the call.
+    let rc = unsafe {
+        cortex_m_semihosting::syscall1(
+            cortex_m_semihosting::nr::GET_CMDLINE,
+            block.as_mut_ptr() as usize,
+        )
+    };
+    if rc != 0 {
+        return false;
+    }
+    let len = block[1].min(buf.len());
+    buf[..len]
+        .split(|&c| c == b' ' || c == 0)
+        .any(|w| w == word)
+}
+
 #[entry]
 fn main() -> ! {
-    let ok = self_test();
-    match ok {
-        Ok(range_mm) => {
-            hprintln!(
-                "activesense-firmware {}: core initialised (self-test range {} mm)",
-                env!("CARGO_PKG_VERSION"),
-                range_mm
-            );
-            debug::exit(debug::EXIT_SUCCESS);
-        }
+    let mut cp = cortex_m::Peripherals::take().unwrap();
+    let range_mm = match self_test() {
+        Ok(r) => r,
         Err(msg) => {
             hprintln!("activesense-firmware: core self-test FAILED: {}", msg);
             debug::exit(debug::EXIT_FAILURE);
+            #[allow(clippy::empty_loop)]
+            loop {}
+        }
+    };
+    hprintln!(
+        "activesense-firmware {}: core initialised (self-test range {} mm)",
+        env!("CARGO_PKG_VERSION"),
+        range_mm
+    );
+    if cmdline_has(b"smoke") {
+        debug::exit(debug::EXIT_SUCCESS);
+    }
+
+    cp.SYST.set_clock_source(SystClkSource::Core);
+    cp.SYST.set_reload(TICK_RELOAD);
+    cp.SYST.clear_current();
+    cp.SYST.enable_interrupt();
+    cp.SYST.enable_counter();
+
+    let mut uart = usart::Usart1::init(115_200, CORE_HZ / 2);
+    usart::enable_rx_interrupt();
+    // SAFETY: the only reference to SESSION, taken once before the serve loop.
+    let session: &mut Session = unsafe { &mut *core::ptr::addr_of_mut!(SESSION) };
+    let Ok(()) = session.announce(&mut uart);
+    hprintln!(
+        "activesense-firmware: serving protocol v{} on USART1",
+        activesense_core::wire::PROTOCOL_VERSION
+    );
+    let mut buf = [0u8; 64];
+    loop {
+        if uart.read_ready().unwrap_or(false) {
+            let n = uart.read(&mut buf).unwrap_or(0);
+            match session.feed(&buf[..n], millis(), &mut uart) {
+                Ok(Control::Continue) => {}
+                Ok(Control::Shutdown) => {
+                    hprintln!("activesense-firmware: shutdown");
+                    debug::exit(debug::EXIT_SUCCESS);
+                }
+                Err(e) => match e {},
+            }
+        } else if session.poll(millis()) {
+            hprintln!("activesense-firmware: host silent, episode abandoned");
+        } else {
+            // Sleep until a byte arrives (USART1 IRQ) or the next SysTick. Under QEMU this
+            // also frees the emulator's I/O thread, which a polling loop would starve.
+            cortex_m::peripheral::NVIC::unpend(usart::Usart1Irq);
+            // SAFETY: as at start-up; DefaultHandler only masks the line again.
+            unsafe { cortex_m::peripheral::NVIC::unmask(usart::Usart1Irq) };
+            if !uart.read_ready().unwrap_or(false) {
+                cortex_m::asm::wfi();
+            }
         }
     }
-    #[allow(clippy::empty_loop)]
-    loop {}
 }
 
 /// Builds a 4 m x 3 m room, casts one ray from (1, 1) along +x (expect 3 m) and runs the

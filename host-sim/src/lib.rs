@@ -2,18 +2,23 @@
 //!
 //! The std side of activesense: the seeded floor-plan generator ([`plans`]), the simulated
 //! instrument and its sensors ([`world`], [`sensor`]), the episode runner with its
-//! trajectory log ([`episode`]) and SVG rendering ([`svg`]); the classical grid Markov
-//! localizer ([`classical`]) and its side-by-side benchmark against the GHT localizer
-//! ([`bench_localization`]). The `activesense` binary
-//! (`src/main.rs`) is the command-line front end.
+//! trajectory log ([`episode`]), the evaluation harness ([`eval`], [`plot`]) and SVG
+//! rendering ([`svg`]); the classical grid Markov localizer ([`classical`]) and the
+//! localization / registration benchmarks ([`bench_localization`], [`bench_registration`]).
+//! [`link`], [`device`] and [`remote`] talk the instrument serial protocol
+//! (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a
+//! thread. The `activesense` binary (`src/main.rs`) is the command-line front end.
 
 pub mod bench_localization;
 pub mod bench_registration;
 pub mod classical;
+pub mod device;
 pub mod episode;
 pub mod eval;
+pub mod link;
 pub mod plans;
 pub mod plot;
+pub mod remote;
 pub mod sensor;
 pub mod svg;
 pub mod world;

@@ -31,6 +31,10 @@ enum Command {
     Plan(PlanArgs),
     /// Run one simulated episode with a baseline agent and print its step log.
     Episode(EpisodeArgs),
+    /// Run episodes on the instrument controller (QEMU, serial, TCP or loopback) while the host plays its sensors.
+    Sim(activesense_sim::remote::SimArgs),
+    /// Talk to an instrument controller on a serial port.
+    Serial(activesense_sim::remote::SerialArgs),
     /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
     Dataset(DatasetArgs),
     /// Evaluate agents on the test plans (the paper's Table 4): writes results.json,
@@ -270,6 +274,8 @@ fn main() -> ExitCode {
         Command::Eval(a) => cmd_eval(a),
         Command::BenchRegistration(a) => cmd_bench_registration(a),
         Command::BenchLocalization(a) => cmd_bench_localization(a),
+        Command::Sim(a) => activesense_sim::remote::cmd_sim(a),
+        Command::Serial(a) => activesense_sim::remote::cmd_serial(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,1 +1,280 @@
 //! Helpers shared by the workspace integration tests in `tests/tests/`.
+//!
+//! The link tests (`loopback.rs`, `pty.rs`, `qemu_hil.rs`) run the same checks over three
+//! transports: [`check_episodes`] (the device's actions and report are bit-identical to the
+//! in-process run and to the lead's episode runner) and [`fault_suite`] (every documented
+//! error, after which the device serves the next request/session).
+
+use activesense_core::agents::{Action, AgentKind};
+use activesense_core::episode::Observation;
+use activesense_core::floorplan::PlanError;
+use activesense_core::wire::*;
+use activesense_sim::device::sim_episode;
+use activesense_sim::episode::{run_episode, EpisodeSpec};
+use activesense_sim::link::{Client, LinkError};
+use activesense_sim::plans::TEST_SEEDS;
+use activesense_sim::remote::{reference_run, same_run};
+use std::io::{Read, Write};
+use std::path::PathBuf;
+
+/// The episode spec used by the link tests.
+pub fn spec(i: u32, rot_bins: u8) -> EpisodeSpec {
+    let agents = [AgentKind::Heuristic1, AgentKind::Blind2, AgentKind::Blind0];
+    EpisodeSpec {
+        episode_seed: 7 + i as u64,
+        rot_bins,
+        ..EpisodeSpec::new(TEST_SEEDS.start + i, agents[i as usize % agents.len()])
+    }
+}
+
+/// Runs `n` episodes with `rot_bins` over `client` and checks each against the
+/// in-process run ([`reference_run`]) and the lead's [`run_episode`]. Returns the number
+/// of steps exchanged.
+pub fn check_episodes<T: Read + Write>(client: &mut Client<T>, n: u32, rot_bins: u8) -> usize {
+    let mut steps = 0;
+    for i in 0..n {
+        let s = spec(i, rot_bins);
+        let (plan, params, mut inst) = sim_episode(&s);
+        client.load_plan(&plan).expect("load plan");
+        let run = client.run_episode(&params, &mut inst).expect("episode");
+        let (p2, prm2, mut inst2) = sim_episode(&s);
+        let local = reference_run(&p2, &prm2, &mut inst2).expect("reference");
+        assert!(
+            same_run(&run, &local),
+            "episode {i} K={rot_bins} differs from in-process"
+        );
+        assert_eq!(run.trace_hash(), run.report.trace_hash);
+        let traj = run_episode(&s);
+        let lead: Vec<(Action, Option<u32>, u32)> = traj
+            .steps
+            .iter()
+            .map(|st| (st.action, st.range.map(f32::to_bits), st.scan))
+            .collect();
+        let ours: Vec<(Action, Option<u32>, u32)> = run
+            .steps
+            .iter()
+            .map(|(a, o)| (*a, o.range.map(f32::to_bits), o.scan))
+            .collect();
+        assert_eq!(
+            ours, lead,
+            "episode {i} differs from the host episode runner"
+        );
+        assert_eq!(run.report.actions, traj.summary.actions);
+        assert_eq!(run.report.measurements, traj.summary.measurements);
+        assert_eq!(run.report.cost.to_bits(), traj.summary.cost.to_bits());
+        assert_eq!(run.report.end, EpisodeEnd::ActionLimit);
+        steps += run.steps.len();
+    }
+    steps
+}
+
+fn raw_frame<M: serde::Serialize>(id: u16, m: &M) -> Vec<u8> {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode_frame(id, m, &mut buf).expect("encode");
+    buf[..n].to_vec()
+}
+
+fn expect_error<T: Read + Write>(c: &mut Client<T>, want_id: u16, want: WireError) {
+    let (id, r) = c.recv_frame().expect("reply");
+    assert_eq!((id, r), (want_id, Response::Error(want)));
+}
+
+fn device_err<T>(r: Result<T, LinkError>) -> WireError {
+    match r {
+        Err(LinkError::Device(e)) => e,
+        Err(e) => panic!("expected a device error, got {e}"),
+        Ok(_) => panic!("expected a device error, got success"),
+    }
+}
+
+/// Every fault of `docs/protocol.md` ("Errors"), each followed by proof that the device
+/// still serves. Leaves the client in an open session.
+pub fn fault_suite<T: Read + Write>(c: &mut Client<T>) {
+    c.hello().expect("hello");
+    // 1. Random garbage (no delimiter inside), then a delimiter: one Framing/CRC error.
+    let mut rng = 0x1234_5678u32;
+    let garbage: Vec<u8> = (0..300)
+        .map(|_| {
+            rng ^= rng << 13;
+            rng ^= rng >> 17;
+            rng ^= rng << 5;
+            (rng as u8).max(1)
+        })
+        .collect();
+    c.send_raw(&garbage).unwrap();
+    c.send_raw(&[0]).unwrap();
+    let (id, r) = c.recv_frame().unwrap();
+    assert_eq!(id, NO_ID);
+    assert!(
+        matches!(r, Response::Error(WireError::Framing | WireError::Crc)),
+        "{r:?}"
+    );
+    c.ping(1).expect("ping after garbage");
+
+    // 2. Truncated frame followed by a delimiter.
+    let f = raw_frame(999, &Request::Ping { nonce: 5 });
+    c.send_raw(&f[..f.len() / 2]).unwrap();
+    c.send_raw(&[0]).unwrap();
+    let (id, r) = c.recv_frame().unwrap();
+    assert_eq!(id, NO_ID);
+    assert!(
+        matches!(r, Response::Error(WireError::Framing | WireError::Crc)),
+        "{r:?}"
+    );
+    c.ping(2).expect("ping after truncation");
+
+    // 3. Corrupted frame (one payload bit flipped): CRC error.
+    let mut f = raw_frame(999, &Request::Ping { nonce: 6 });
+    let k = f.len() / 2;
+    f[k] ^= if f[k] == 0x10 { 0x20 } else { 0x10 };
+    c.send_raw(&f).unwrap();
+    let (id, r) = c.recv_frame().unwrap();
+    assert_eq!(id, NO_ID);
+    // A flipped COBS code byte shows up as a framing error, any other bit as a CRC error.
+    assert!(
+        matches!(r, Response::Error(WireError::Framing | WireError::Crc)),
+        "{r:?}"
+    );
+    c.ping(3).expect("ping after corruption");
+
+    // 4. Oversized frame: Oversized, resync on the next delimiter.
+    c.send_raw(&vec![0x42u8; MAX_FRAME + 50]).unwrap();
+    c.send_raw(&[0]).unwrap();
+    expect_error(c, NO_ID, WireError::Oversized);
+    c.ping(4).expect("ping after oversized frame");
+
+    // 5. Plans: too many vertices (typed), self-intersecting, NaN coordinate.
+    let circle: Vec<[f32; 2]> = (0..100)
+        .map(|i| {
+            let a = i as f32 * std::f32::consts::TAU / 100.0;
+            [5.0 * a.cos(), 5.0 * a.sin()]
+        })
+        .collect();
+    assert_eq!(
+        device_err(c.load_raw_plan(&circle)),
+        WireError::InvalidPlan(PlanError::TooManyVertices)
+    );
+    let bow = [[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]];
+    assert!(matches!(
+        device_err(c.load_raw_plan(&bow)),
+        WireError::InvalidPlan(PlanError::SelfIntersection(..))
+    ));
+    let nan = [[0.0, 0.0], [2.0, 0.0], [f32::NAN, 2.0]];
+    assert_eq!(
+        device_err(c.load_raw_plan(&nan)),
+        WireError::InvalidPlan(PlanError::NonFiniteCoordinate(2))
+    );
+    // A plan beyond the wire capacity is refused locally, before sending.
+    let huge: Vec<[f32; 2]> = (0..200).map(|i| [i as f32, 0.0]).collect();
+    assert!(matches!(c.load_raw_plan(&huge), Err(LinkError::Local(_))));
+
+    // 6. Episode: bad params, NaN/inf/negative ranges, wrong step; then a clean finish.
+    let s = spec(0, 10);
+    let (plan, params, _) = sim_episode(&s);
+    c.load_plan(&plan).expect("plan");
+    let mut p = params;
+    p.rot_bins = 1;
+    p.known_heading = None;
+    assert_eq!(
+        device_err(c.call(&Request::StartEpisode(p))),
+        WireError::InvalidParams(ParamError::KnownHeadingRequired)
+    );
+    let mut p = params;
+    p.max_actions = 20;
+    p.agent = AgentKind::Heuristic0; // step 0 is a measurement
+    assert_eq!(
+        c.call(&Request::StartEpisode(p)).unwrap(),
+        Response::Act {
+            step: 0,
+            action: Action::Measure
+        }
+    );
+    for (r, e) in [
+        (f32::NAN, ObservationError::NonFiniteRange),
+        (f32::INFINITY, ObservationError::NonFiniteRange),
+        (f32::NEG_INFINITY, ObservationError::NonFiniteRange),
+        (-0.5, ObservationError::NegativeRange),
+    ] {
+        let obs = Observation {
+            range: Some(r),
+            scan: 0,
+        };
+        assert_eq!(
+            device_err(c.call(&Request::Observe {
+                step: 0,
+                observation: obs
+            })),
+            WireError::InvalidObservation(e)
+        );
+    }
+    let ok = Observation {
+        range: Some(2.5),
+        scan: 1,
+    };
+    assert_eq!(
+        device_err(c.call(&Request::Observe {
+            step: 5,
+            observation: ok
+        })),
+        WireError::StepMismatch { expected: 0 }
+    );
+    assert_eq!(
+        c.call(&Request::Observe {
+            step: 0,
+            observation: ok
+        })
+        .unwrap(),
+        Response::Act {
+            step: 1,
+            action: Action::RotateLeft
+        }
+    );
+    // Out-of-sequence request id.
+    c.send_raw(&raw_frame(4000, &Request::Status)).unwrap();
+    let (id, r) = c.recv_frame().unwrap();
+    assert_eq!(id, 4000);
+    assert!(
+        matches!(r, Response::Error(WireError::OutOfSequence { .. })),
+        "{r:?}"
+    );
+    // 7. The host disappears mid-episode; a new host says Hello and runs a full episode.
+    {
+        let mut fresh = Client::new(c.get_mut());
+        fresh.hello().expect("new session after abandoned episode");
+        let st = fresh.status().unwrap();
+        assert_eq!(st.phase, Phase::Ready);
+        check_episodes(&mut fresh, 1, 1);
+    }
+    // The old client object continues with its own id counter: re-open.
+    c.hello().expect("hello again");
+    let st = c.status().unwrap();
+    assert!(st.link.frames_bad >= 4, "{st:?}");
+    assert!(st.link.sequence_errors >= 2, "{st:?}");
+    assert_eq!(c.abort().unwrap(), None);
+}
+
+/// The firmware ELF for the QEMU test: `ACTIVESENSE_FIRMWARE_ELF` if set, else built here
+/// with `cargo build -p activesense-firmware --target thumbv7em-none-eabihf --profile
+/// firmware` (a no-op when up to date; `.ci/run` may build it first).
+pub fn firmware_elf() -> PathBuf {
+    if let Ok(p) = std::env::var("ACTIVESENSE_FIRMWARE_ELF") {
+        return PathBuf::from(p);
+    }
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = std::process::Command::new(cargo)
+        .current_dir(&root)
+        .args([
+            "build",
+            "-p",
+            "activesense-firmware",
+            "--target",
+            "thumbv7em-none-eabihf",
+            "--profile",
+            "firmware",
+        ])
+        .status()
+        .expect("run cargo to build the firmware");
+    assert!(status.success(), "building the firmware failed");
+    root.join(activesense_sim::link::DEFAULT_ELF)
+}

@@ -9,6 +9,9 @@
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
 //! ```
 
+mod fuzz;
+mod size;
+
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -27,6 +30,8 @@ fn main() {
         Some("setup") => setup(),
         Some("firmware") => build_firmware().map(|p| println!("{}", p.display())),
         Some("qemu-smoke") => qemu_smoke(),
+        Some("size") => build_firmware().and_then(|elf| size::report(&elf)),
+        Some("fuzz") => fuzz::run(&args[1..]),
         Some("help") | Some("--help") | Some("-h") | None => {
             print_help();
             Ok(())
@@ -49,7 +54,9 @@ fn print_help() {
          ci          whole test suite (installs the thumb target and qemu-system-arm if missing)\n  \
          setup       install the thumbv7em-none-eabihf target and qemu-system-arm if missing\n  \
          firmware    build the firmware ELF and print its path\n  \
-         qemu-smoke  boot the firmware under qemu-system-arm -M netduinoplus2 and check its boot line"
+         qemu-smoke  boot the firmware under qemu-system-arm -M netduinoplus2 and check its boot line\n  \
+         size        firmware flash / static RAM against the budgets (512 KiB / 96 KiB)\n  \
+         fuzz [SECS] run the cargo-fuzz target `session` for SECS seconds (default 60)"
     );
 }
 
@@ -166,7 +173,8 @@ fn qemu_smoke() -> Result<()> {
     setup()?;
     let elf = build_firmware()?;
     let mut cmd = qemu_command(&elf);
-    cmd.args(["-serial", "null"])
+    // `smoke`: the firmware exits after its boot line instead of serving USART1.
+    cmd.args(["-serial", "null", "-append", "smoke"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     eprintln!("xtask: running {cmd:?}");

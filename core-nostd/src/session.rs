@@ -1,0 +1,1003 @@
+//! The device side of the serial protocol: the episode [`Controller`] (the instrument's
+//! decision maker) and the [`Session`] state machine that serves the protocol of
+//! [`crate::wire`] over any `embedded_io` byte stream.
+//!
+//! **Who decides.** The device owns the decisions: it chooses every action (the baseline
+//! agents now, the learnt policy later), keeps the episode's encoder bearing
+//! ([`EpisodeState`]), collects the measurements, and — once they land — runs the GHT
+//! localization and the sparse registration. The instrument's sensors only answer. In
+//! simulation the host plays the sensors: each device reply `Act { step, action }` is an
+//! action request, the host's `Observe { step, observation }` is the sensors' answer.
+//!
+//! **Robustness.** Bytes go through a fixed-size [`FrameAccumulator`]. Garbage, truncated,
+//! oversized, CRC-bad and undecodable frames are each answered with one
+//! [`Response::Error`] (id [`NO_ID`] when the frame's own id cannot be trusted) and the
+//! link resynchronises on the next `0x00`. Out-of-sequence requests get
+//! `Error(OutOfSequence)` / `Error(StepMismatch)`; a duplicated request id re-sends the
+//! cached reply (retransmission after a lost reply). A host that goes silent mid-episode
+//! for longer than [`SessionConfig::timeout_ms`] has its episode abandoned by
+//! [`Session::poll`]; a new `Hello` always opens a fresh session, whatever the state.
+//! Nothing here panics on input or blocks except on the link itself.
+//!
+//! **Memory.** [`Session::new`] is a `const fn`, so the firmware places the whole state
+//! (≈ 7 KiB: frame buffer, plan, measurement log) in a `static`.
+//!
+//! **Integration points (pending).** The GHT localizer (`crate::localization`) plugs into
+//! [`Controller::observe`] (vote each measurement) and [`Controller::next_step`] (end the
+//! episode with [`EpisodeEnd::Localized`] once it succeeds, fill `coarse`); the sparse
+//! registration fills `refined` from [`Controller::measurements`] when the episode ends.
+//! Until then every episode runs to its action limit and reports counts, cost and the
+//! trace fingerprint.
+
+use crate::agents::{Action, BaselineAgent};
+use crate::episode::{EpisodeConfig, EpisodeState, Observation, SCAN_PIXELS};
+use crate::floorplan::{FloorPlan, PlanError, MAX_VERTICES};
+use crate::geometry::v2;
+use crate::wire::*;
+use embedded_io::{Read, Write};
+use heapless::{String as HString, Vec as HVec};
+
+/// Measurements kept per episode (registration input); the action limit bounds it.
+pub const MAX_MEASUREMENTS: usize = MAX_EPISODE_ACTIONS as usize;
+/// Largest encoded reply frame.
+pub const MAX_REPLY: usize = 256;
+/// Default silence after which a running episode is abandoned (ms).
+pub const DEFAULT_TIMEOUT_MS: u32 = 10_000;
+
+/// One range measurement in the scene frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Measurement {
+    /// Encoder bearing β (rad, scene frame).
+    pub bearing: f32,
+    /// Range (m).
+    pub range: f32,
+}
+
+/// What the controller wants next.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    /// Perform `action` (the `step`-th of the episode) and report the observation.
+    Act {
+        /// 0-based action index.
+        step: u16,
+        /// The action.
+        action: Action,
+    },
+    /// The episode is over.
+    Done(EpisodeReport),
+}
+
+struct Running {
+    params: EpisodeParams,
+    state: EpisodeState,
+    agent: BaselineAgent,
+    pending: Option<Action>,
+    no_returns: u16,
+    last_scan: u32,
+    trace: TraceHash,
+    cycles: UpdateStats,
+    update_start: u32,
+}
+
+/// The device's decision maker for one plan and one episode at a time.
+pub struct Controller {
+    plan: Option<FloorPlan>,
+    running: Option<Running>,
+    measurements: HVec<Measurement, MAX_MEASUREMENTS>,
+    cycles: UpdateStats,
+    clock: Option<fn() -> u32>,
+}
+
+impl Controller {
+    /// An idle controller. `clock` (a free-running cycle counter) enables per-update
+    /// cycle statistics.
+    pub const fn new(clock: Option<fn() -> u32>) -> Self {
+        Controller {
+            plan: None,
+            running: None,
+            measurements: HVec::new(),
+            cycles: UpdateStats {
+                updates: 0,
+                total_cycles: 0,
+                max_cycles: 0,
+            },
+            clock,
+        }
+    }
+
+    fn now(&self) -> u32 {
+        self.clock.map(|c| c()).unwrap_or(0)
+    }
+
+    /// Installs a validated plan (aborts any episode).
+    pub fn load_plan(&mut self, plan: FloorPlan) {
+        self.running = None;
+        self.plan = Some(plan);
+    }
+
+    /// The loaded plan.
+    pub fn plan(&self) -> Option<&FloorPlan> {
+        self.plan.as_ref()
+    }
+
+    /// Drops plan, episode and statistics.
+    pub fn reset(&mut self) {
+        self.plan = None;
+        self.running = None;
+        self.measurements.clear();
+        self.cycles = UpdateStats::default();
+    }
+
+    /// True while an episode runs.
+    pub fn is_running(&self) -> bool {
+        self.running.is_some()
+    }
+
+    /// Actions taken in the running episode.
+    pub fn episode_actions(&self) -> u16 {
+        self.running.as_ref().map(|r| r.state.actions).unwrap_or(0)
+    }
+
+    /// The latest topological scan of the running episode (the initial one before the
+    /// first observation).
+    pub fn last_scan(&self) -> Option<u32> {
+        self.running.as_ref().map(|r| r.last_scan)
+    }
+
+    /// Cycle statistics since power-on / reset.
+    pub fn cycles(&self) -> UpdateStats {
+        self.cycles
+    }
+
+    /// The measurements of the running (or last) episode, scene frame.
+    pub fn measurements(&self) -> &[Measurement] {
+        &self.measurements
+    }
+
+    /// Validates `p` against the loaded plan.
+    pub fn check_params(&self, p: &EpisodeParams) -> Result<(), WireError> {
+        let plan = self.plan.as_ref().ok_or(WireError::NoPlan)?;
+        let bad = |e| Err(WireError::InvalidParams(e));
+        if p.steps_per_turn == 0 || p.steps_per_turn > 3600 {
+            return bad(ParamError::StepsPerTurn);
+        }
+        if p.max_actions == 0 || p.max_actions > MAX_EPISODE_ACTIONS {
+            return bad(ParamError::MaxActions);
+        }
+        if p.rot_bins == 0 || p.rot_bins > MAX_ROT_BINS {
+            return bad(ParamError::RotBins);
+        }
+        if let Some(h) = p.known_heading {
+            if !h.is_finite() {
+                return bad(ParamError::NonFinite);
+            }
+        } else if p.rot_bins == 1 {
+            return bad(ParamError::KnownHeadingRequired);
+        }
+        if let Some(gt) = p.ground_truth {
+            if !gt.is_finite() {
+                return bad(ParamError::NonFinite);
+            }
+            if !plan.contains(v2(gt.x, gt.y)) {
+                return bad(ParamError::GroundTruthOutside);
+            }
+        }
+        Ok(())
+    }
+
+    /// Starts an episode (replacing any running one).
+    pub fn start(&mut self, p: &EpisodeParams) -> Result<(), WireError> {
+        self.check_params(p)?;
+        let config = EpisodeConfig {
+            steps_per_turn: p.steps_per_turn,
+            max_actions: p.max_actions,
+            ..EpisodeConfig::default()
+        };
+        self.measurements.clear();
+        self.running = Some(Running {
+            params: *p,
+            state: EpisodeState::new(config),
+            agent: BaselineAgent::new(p.agent, p.seed),
+            pending: None,
+            no_returns: 0,
+            // The scan is not used by the baseline agents; the learnt policy will read it.
+            last_scan: p.initial_scan,
+            trace: TraceHash::new(),
+            cycles: UpdateStats::default(),
+            update_start: self.now(),
+        });
+        Ok(())
+    }
+
+    fn report(r: &Running, end: EpisodeEnd) -> EpisodeReport {
+        EpisodeReport {
+            end,
+            actions: r.state.actions,
+            measurements: r.state.measurements,
+            rotations: r.state.rotations,
+            no_returns: r.no_returns,
+            cost: r.state.cost,
+            bearing_index: r.state.bearing_index,
+            trace_hash: r.trace.value(),
+            coarse: None,
+            refined: None,
+            cycles: r.cycles,
+        }
+    }
+
+    /// The next action request, or the end of the episode (which clears it). Repeats the
+    /// pending request until it is observed. Without a running episode: `None`.
+    pub fn next_step(&mut self) -> Option<Step> {
+        let now = self.now();
+        let r = self.running.as_mut()?;
+        if let Some(action) = r.pending {
+            return Some(Step::Act {
+                step: r.state.actions,
+                action,
+            });
+        }
+        // Pending integration: the localizer's success test ends the episode here with
+        // EpisodeEnd::Localized and the coarse pose.
+        let step = if r.state.exhausted() {
+            None
+        } else {
+            let action = r.agent.next_action();
+            r.pending = Some(action);
+            Some(Step::Act {
+                step: r.state.actions,
+                action,
+            })
+        };
+        let cycles = now.wrapping_sub(r.update_start);
+        if r.state.actions > 0 {
+            r.cycles.record(cycles);
+            self.cycles.record(cycles);
+        }
+        match step {
+            Some(s) => Some(s),
+            None => {
+                let rep = Self::report(r, EpisodeEnd::ActionLimit);
+                self.running = None;
+                Some(Step::Done(rep))
+            }
+        }
+    }
+
+    /// Books the instrument's answer to action request `step`.
+    pub fn observe(&mut self, step: u16, obs: &Observation) -> Result<(), WireError> {
+        let now = self.now();
+        let r = self.running.as_mut().ok_or(WireError::UnexpectedRequest)?;
+        let action = match r.pending {
+            Some(a) if step == r.state.actions => a,
+            _ => {
+                return Err(WireError::StepMismatch {
+                    expected: r.state.actions,
+                })
+            }
+        };
+        let bad = |e| Err(WireError::InvalidObservation(e));
+        if obs.scan >> SCAN_PIXELS != 0 {
+            return bad(ObservationError::ScanBits);
+        }
+        if let Some(range) = obs.range {
+            if action != Action::Measure {
+                return bad(ObservationError::RangeOnRotation);
+            }
+            if !range.is_finite() {
+                return bad(ObservationError::NonFiniteRange);
+            }
+            if range < 0.0 {
+                return bad(ObservationError::NegativeRange);
+            }
+        }
+        r.update_start = now;
+        r.pending = None;
+        r.state.apply(action);
+        r.trace.push(action, obs);
+        r.last_scan = obs.scan;
+        if action == Action::Measure {
+            match obs.range {
+                Some(range) => {
+                    // Capacity = action limit maximum, so this cannot overflow.
+                    let _ = self.measurements.push(Measurement {
+                        bearing: r.state.bearing(),
+                        range,
+                    });
+                }
+                None => r.no_returns = r.no_returns.saturating_add(1),
+            }
+        }
+        // Pending integration: vote (bearing, range) into the GHT accumulator here.
+        let _ = &r.params;
+        Ok(())
+    }
+
+    /// Aborts the running episode, returning its report so far.
+    pub fn abort(&mut self) -> Option<EpisodeReport> {
+        let r = self.running.take()?;
+        Some(Self::report(&r, EpisodeEnd::Aborted))
+    }
+}
+
+/// Static configuration of a [`Session`].
+#[derive(Clone, Copy)]
+pub struct SessionConfig {
+    /// Version string reported in `Hello` (≤ 24 bytes; longer is cut).
+    pub firmware: &'static str,
+    /// Silence (ms) after which a running episode is abandoned.
+    pub timeout_ms: u32,
+    /// Free-running cycle counter for per-update statistics.
+    pub cycle_clock: Option<fn() -> u32>,
+}
+
+/// What the caller should do after [`Session::feed`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Control {
+    /// Keep serving.
+    Continue,
+    /// `Shutdown` was acknowledged: stop serving.
+    Shutdown,
+}
+
+/// Why [`Session::serve`] returned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ServeEnd {
+    /// The host sent `Shutdown`.
+    Shutdown,
+    /// The link reported end of stream.
+    Eof,
+}
+
+/// The device's protocol state machine.
+pub struct Session {
+    acc: FrameAccumulator,
+    ctl: Controller,
+    config: SessionConfig,
+    open: bool,
+    last_id: u16,
+    reply: [u8; MAX_REPLY],
+    reply_len: usize,
+    stats: LinkStats,
+    last_rx_ms: u32,
+}
+
+fn next_id(id: u16) -> u16 {
+    match id.wrapping_add(1) {
+        NO_ID => 1,
+        n => n,
+    }
+}
+
+impl Session {
+    /// A closed session (power-on state).
+    pub const fn new(config: SessionConfig) -> Self {
+        Session {
+            acc: FrameAccumulator::new(),
+            ctl: Controller::new(config.cycle_clock),
+            config,
+            open: false,
+            last_id: NO_ID,
+            reply: [0; MAX_REPLY],
+            reply_len: 0,
+            stats: LinkStats {
+                frames_ok: 0,
+                frames_bad: 0,
+                sequence_errors: 0,
+                retransmissions: 0,
+                timeouts: 0,
+                episodes: 0,
+            },
+            last_rx_ms: 0,
+        }
+    }
+
+    /// The device description sent in answer to `Hello`.
+    pub fn device_info(&self) -> DeviceInfo {
+        let mut firmware = HString::new();
+        for c in self.config.firmware.chars() {
+            if firmware.push(c).is_err() {
+                break;
+            }
+        }
+        let mut capabilities = CAP_BASELINE_AGENTS | CAP_GROUND_TRUTH | CAP_SHUTDOWN;
+        if self.config.cycle_clock.is_some() {
+            capabilities |= CAP_CYCLE_COUNTS;
+        }
+        DeviceInfo {
+            protocol: PROTOCOL_VERSION,
+            firmware,
+            grid: GridInfo::default(),
+            max_vertices: MAX_VERTICES as u8,
+            max_actions: MAX_EPISODE_ACTIONS,
+            max_rot_bins: MAX_ROT_BINS,
+            scan_pixels: SCAN_PIXELS as u8,
+            max_frame: MAX_FRAME as u16,
+            capabilities,
+        }
+    }
+
+    /// Sends the unsolicited boot announcement (`Hello` with id [`NO_ID`]) the firmware
+    /// emits once its UART is up, so a host knows it may start talking.
+    pub fn announce<W: Write>(&mut self, out: &mut W) -> Result<(), W::Error> {
+        let info = self.device_info();
+        self.send(NO_ID, &Response::Hello(info), out)
+    }
+
+    /// Current phase.
+    pub fn phase(&self) -> Phase {
+        if !self.open {
+            Phase::Closed
+        } else if self.ctl.is_running() {
+            Phase::Episode
+        } else {
+            Phase::Ready
+        }
+    }
+
+    /// Link counters.
+    pub fn stats(&self) -> LinkStats {
+        self.stats
+    }
+
+    /// The controller (plan, measurements).
+    pub fn controller(&self) -> &Controller {
+        &self.ctl
+    }
+
+    /// Checks the host-silence timeout at time `now_ms`; returns true when a running
+    /// episode was abandoned (the session closes; the next `Hello` reopens it). A partial
+    /// frame older than the timeout is dropped as well.
+    pub fn poll(&mut self, now_ms: u32) -> bool {
+        if now_ms.wrapping_sub(self.last_rx_ms) <= self.config.timeout_ms {
+            return false;
+        }
+        self.acc.clear();
+        if self.ctl.abort().is_some() {
+            self.stats.timeouts = self.stats.timeouts.saturating_add(1);
+            self.open = false;
+            return true;
+        }
+        false
+    }
+
+    fn send<W: Write>(&mut self, id: u16, msg: &Response, out: &mut W) -> Result<(), W::Error> {
+        let mut buf = [0u8; MAX_REPLY];
+        // Every Response fits MAX_REPLY (asserted by a unit test over the largest ones);
+        // a failure here would be a programming error, reported as a bare Decode error.
+        let n = match encode_frame(id, msg, &mut buf) {
+            Ok(n) => n,
+            Err(_) => encode_frame(id, &Response::Error(WireError::Decode), &mut buf).unwrap_or(0),
+        };
+        if id != NO_ID && !matches!(msg, Response::Error(_)) {
+            self.reply[..n].copy_from_slice(&buf[..n]);
+            self.reply_len = n;
+        }
+        out.write_all(&buf[..n])?;
+        out.flush()
+    }
+
+    /// Feeds received bytes at time `now_ms`, writing any replies to `out`.
+    pub fn feed<W: Write>(
+        &mut self,
+        bytes: &[u8],
+        now_ms: u32,
+        out: &mut W,
+    ) -> Result<Control, W::Error> {
+        if !bytes.is_empty() {
+            self.last_rx_ms = now_ms;
+        }
+        for &b in bytes {
+            let decoded = match self.acc.push(b) {
+                Feed::Pending | Feed::Empty => continue,
+                Feed::Oversized => Err((FrameError::TooLarge, NO_ID)),
+                Feed::Frame(f) => decode_frame_with_id::<Request>(f),
+            };
+            match decoded {
+                Err((e, id)) => {
+                    self.stats.frames_bad = self.stats.frames_bad.saturating_add(1);
+                    self.send(id, &Response::Error(e.to_wire()), out)?;
+                }
+                Ok((id, req)) => {
+                    self.stats.frames_ok = self.stats.frames_ok.saturating_add(1);
+                    if self.request(id, req, out)? == Control::Shutdown {
+                        return Ok(Control::Shutdown);
+                    }
+                }
+            }
+        }
+        Ok(Control::Continue)
+    }
+
+    fn request<W: Write>(
+        &mut self,
+        id: u16,
+        req: Request,
+        out: &mut W,
+    ) -> Result<Control, W::Error> {
+        if let Request::Hello { protocol } = req {
+            self.ctl.abort();
+            self.acc_reset_ids(id);
+            if protocol != PROTOCOL_VERSION || id == NO_ID {
+                self.open = false;
+                let e = if id == NO_ID {
+                    WireError::OutOfSequence { expected: 1 }
+                } else {
+                    WireError::VersionMismatch {
+                        device: PROTOCOL_VERSION,
+                    }
+                };
+                self.send(id, &Response::Error(e), out)?;
+                return Ok(Control::Continue);
+            }
+            self.open = true;
+            let info = self.device_info();
+            self.send(id, &Response::Hello(info), out)?;
+            return Ok(Control::Continue);
+        }
+        if !self.open {
+            self.send(id, &Response::Error(WireError::NoSession), out)?;
+            return Ok(Control::Continue);
+        }
+        if id == self.last_id && self.reply_len > 0 {
+            self.stats.retransmissions = self.stats.retransmissions.saturating_add(1);
+            let n = self.reply_len;
+            out.write_all(&self.reply[..n])?;
+            out.flush()?;
+            return Ok(Control::Continue);
+        }
+        let expected = next_id(self.last_id);
+        if id != expected {
+            self.stats.sequence_errors = self.stats.sequence_errors.saturating_add(1);
+            self.send(
+                id,
+                &Response::Error(WireError::OutOfSequence { expected }),
+                out,
+            )?;
+            return Ok(Control::Continue);
+        }
+        self.last_id = id;
+        self.reply_len = 0;
+        let (resp, control) = self.handle(req);
+        if let Response::Error(WireError::StepMismatch { .. }) = resp {
+            self.stats.sequence_errors = self.stats.sequence_errors.saturating_add(1);
+        }
+        self.send(id, &resp, out)?;
+        Ok(control)
+    }
+
+    fn acc_reset_ids(&mut self, id: u16) {
+        self.last_id = id;
+        self.reply_len = 0;
+    }
+
+    fn step_response(&mut self) -> Response {
+        match self.ctl.next_step() {
+            Some(Step::Act { step, action }) => Response::Act { step, action },
+            Some(Step::Done(rep)) => {
+                self.stats.episodes = self.stats.episodes.saturating_add(1);
+                Response::Done(rep)
+            }
+            None => Response::Error(WireError::UnexpectedRequest),
+        }
+    }
+
+    fn handle(&mut self, req: Request) -> (Response, Control) {
+        let r = match req {
+            Request::Hello { .. } => Response::Error(WireError::UnexpectedRequest),
+            Request::Ping { nonce } => Response::Pong { nonce },
+            Request::LoadPlan { vertices } => self.load_plan(&vertices),
+            Request::StartEpisode(p) => {
+                if self.ctl.is_running() {
+                    Response::Error(WireError::UnexpectedRequest)
+                } else {
+                    match self.ctl.start(&p) {
+                        Ok(()) => self.step_response(),
+                        Err(e) => Response::Error(e),
+                    }
+                }
+            }
+            Request::Observe { step, observation } => match self.ctl.observe(step, &observation) {
+                Ok(()) => self.step_response(),
+                Err(e) => Response::Error(e),
+            },
+            Request::Status => Response::Status(DeviceStatus {
+                phase: self.phase(),
+                plan_vertices: self.ctl.plan().map(|p| p.len() as u8).unwrap_or(0),
+                episode_actions: self.ctl.episode_actions(),
+                link: self.stats,
+                cycles: self.ctl.cycles(),
+            }),
+            Request::Abort => match self.ctl.abort() {
+                Some(rep) => Response::Aborted(rep),
+                None => Response::Ack,
+            },
+            Request::Reset => {
+                self.ctl.reset();
+                self.stats = LinkStats::default();
+                self.open = false;
+                Response::Ack
+            }
+            Request::Shutdown => {
+                self.ctl.abort();
+                return (Response::Ack, Control::Shutdown);
+            }
+        };
+        (r, Control::Continue)
+    }
+
+    fn load_plan(&mut self, vertices: &[[f32; 2]]) -> Response {
+        if self.ctl.is_running() {
+            return Response::Error(WireError::UnexpectedRequest);
+        }
+        if vertices.len() > MAX_VERTICES {
+            return Response::Error(WireError::InvalidPlan(PlanError::TooManyVertices));
+        }
+        let mut raw: HVec<[f32; 2], MAX_VERTICES> = HVec::new();
+        for v in vertices {
+            let _ = raw.push(*v);
+        }
+        match FloorPlan::from_raw(raw) {
+            Ok(plan) => {
+                let summary = PlanSummary {
+                    vertices: plan.len() as u8,
+                    perimeter: plan.perimeter(),
+                    max_radius: plan.max_radius(),
+                };
+                self.ctl.load_plan(plan);
+                Response::PlanLoaded(summary)
+            }
+            Err(e) => Response::Error(WireError::InvalidPlan(e)),
+        }
+    }
+
+    /// Blocking serve loop over a link whose `read` blocks until at least one byte is
+    /// available; `clock_ms` supplies the time for timeouts (checked after every read).
+    /// Returns on `Shutdown` or end of stream.
+    pub fn serve<L: Read + Write>(
+        &mut self,
+        link: &mut L,
+        mut clock_ms: impl FnMut() -> u32,
+    ) -> Result<ServeEnd, L::Error> {
+        let mut buf = [0u8; 64];
+        loop {
+            let n = link.read(&mut buf)?;
+            if n == 0 {
+                return Ok(ServeEnd::Eof);
+            }
+            let now = clock_ms();
+            self.poll(now);
+            if self.feed(&buf[..n], now, link)? == Control::Shutdown {
+                return Ok(ServeEnd::Shutdown);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::agents::AgentKind;
+    use crate::geometry::Pose2;
+    use std::vec::Vec;
+
+    struct Sink(Vec<u8>);
+    impl embedded_io::ErrorType for Sink {
+        type Error = core::convert::Infallible;
+    }
+    impl Write for Sink {
+        fn write(&mut self, b: &[u8]) -> Result<usize, Self::Error> {
+            self.0.extend_from_slice(b);
+            Ok(b.len())
+        }
+        fn flush(&mut self) -> Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+
+    const CFG: SessionConfig = SessionConfig {
+        firmware: "test",
+        timeout_ms: 1000,
+        cycle_clock: None,
+    };
+
+    fn frames(bytes: &[u8]) -> Vec<(u16, Response)> {
+        let mut acc = FrameAccumulator::new();
+        let mut v = Vec::new();
+        for &b in bytes {
+            if let Feed::Frame(f) = acc.push(b) {
+                v.push(decode_frame::<Response>(f).unwrap());
+            }
+        }
+        v
+    }
+
+    fn call(s: &mut Session, id: u16, req: &Request) -> Response {
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode_frame(id, req, &mut out).unwrap();
+        let mut sink = Sink(Vec::new());
+        s.feed(&out[..n], 0, &mut sink).unwrap();
+        let mut f = frames(&sink.0);
+        assert_eq!(f.len(), 1, "{f:?}");
+        let (rid, r) = f.remove(0);
+        assert_eq!(rid, id);
+        r
+    }
+
+    fn square() -> HVec<[f32; 2], MAX_WIRE_VERTICES> {
+        HVec::from_slice(&[[-2.0, -1.5], [2.0, -1.5], [2.0, 1.5], [-2.0, 1.5]]).unwrap()
+    }
+
+    fn params(max_actions: u16) -> EpisodeParams {
+        EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 1,
+            steps_per_turn: 54,
+            max_actions,
+            rot_bins: 10,
+            known_heading: None,
+            ground_truth: Some(Pose2::new(0.5, 0.2, 0.3)),
+            initial_scan: 0,
+        }
+    }
+
+    #[test]
+    fn full_episode_and_sequence_rules() {
+        let mut s = Session::new(CFG);
+        assert_eq!(
+            call(&mut s, 5, &Request::Ping { nonce: 1 }),
+            Response::Error(WireError::NoSession)
+        );
+        assert!(matches!(
+            call(
+                &mut s,
+                5,
+                &Request::Hello {
+                    protocol: PROTOCOL_VERSION
+                }
+            ),
+            Response::Hello(_)
+        ));
+        assert_eq!(
+            call(&mut s, 9, &Request::Ping { nonce: 1 }),
+            Response::Error(WireError::OutOfSequence { expected: 6 })
+        );
+        assert!(matches!(
+            call(&mut s, 6, &Request::LoadPlan { vertices: square() }),
+            Response::PlanLoaded(_)
+        ));
+        // Retransmission of id 6 gets the same reply again.
+        assert!(matches!(
+            call(&mut s, 6, &Request::LoadPlan { vertices: square() }),
+            Response::PlanLoaded(_)
+        ));
+        let mut id = 7;
+        let mut r = call(&mut s, id, &Request::StartEpisode(params(12)));
+        let mut n = 0;
+        while let Response::Act { step, action } = r {
+            assert_eq!(step, n);
+            id += 1;
+            let obs = Observation {
+                range: (action == Action::Measure).then_some(1.5),
+                scan: 3,
+            };
+            if n == 2 {
+                assert_eq!(
+                    call(
+                        &mut s,
+                        id,
+                        &Request::Observe {
+                            step: 9,
+                            observation: obs
+                        }
+                    ),
+                    Response::Error(WireError::StepMismatch { expected: 2 })
+                );
+                id += 1;
+            }
+            r = call(
+                &mut s,
+                id,
+                &Request::Observe {
+                    step,
+                    observation: obs,
+                },
+            );
+            n += 1;
+        }
+        match r {
+            Response::Done(rep) => {
+                assert_eq!(rep.actions, 12);
+                assert_eq!(rep.measurements, 2);
+                assert_eq!(rep.end, EpisodeEnd::ActionLimit);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(s.controller().measurements().len(), 2);
+    }
+
+    #[test]
+    fn bad_inputs_get_typed_errors() {
+        let mut s = Session::new(CFG);
+        call(
+            &mut s,
+            1,
+            &Request::Hello {
+                protocol: PROTOCOL_VERSION,
+            },
+        );
+        let bow: HVec<_, MAX_WIRE_VERTICES> =
+            HVec::from_slice(&[[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]]).unwrap();
+        assert!(matches!(
+            call(&mut s, 2, &Request::LoadPlan { vertices: bow }),
+            Response::Error(WireError::InvalidPlan(PlanError::SelfIntersection(..)))
+        ));
+        let mut many = HVec::<_, MAX_WIRE_VERTICES>::new();
+        for i in 0..100 {
+            let a = i as f32 * 0.0628;
+            many.push([libm::cosf(a) * 5.0, libm::sinf(a) * 5.0])
+                .unwrap();
+        }
+        assert_eq!(
+            call(&mut s, 3, &Request::LoadPlan { vertices: many }),
+            Response::Error(WireError::InvalidPlan(PlanError::TooManyVertices))
+        );
+        assert_eq!(
+            call(&mut s, 4, &Request::StartEpisode(params(5))),
+            Response::Error(WireError::NoPlan)
+        );
+        call(&mut s, 5, &Request::LoadPlan { vertices: square() });
+        let mut p = params(5);
+        p.rot_bins = 1;
+        assert_eq!(
+            call(&mut s, 6, &Request::StartEpisode(p)),
+            Response::Error(WireError::InvalidParams(ParamError::KnownHeadingRequired))
+        );
+        p = params(5);
+        p.ground_truth = Some(Pose2::new(9.0, 0.0, 0.0));
+        assert_eq!(
+            call(&mut s, 7, &Request::StartEpisode(p)),
+            Response::Error(WireError::InvalidParams(ParamError::GroundTruthOutside))
+        );
+        let r = call(&mut s, 8, &Request::StartEpisode(params(5)));
+        assert_eq!(
+            r,
+            Response::Act {
+                step: 0,
+                action: Action::Measure
+            }
+        );
+        for (i, bad) in [f32::NAN, f32::INFINITY, -1.0].into_iter().enumerate() {
+            let r = call(
+                &mut s,
+                9 + i as u16,
+                &Request::Observe {
+                    step: 0,
+                    observation: Observation {
+                        range: Some(bad),
+                        scan: 0,
+                    },
+                },
+            );
+            assert!(
+                matches!(r, Response::Error(WireError::InvalidObservation(_))),
+                "{r:?}"
+            );
+        }
+        // Still waiting at step 0; a good observation proceeds.
+        let r = call(
+            &mut s,
+            12,
+            &Request::Observe {
+                step: 0,
+                observation: Observation {
+                    range: Some(2.0),
+                    scan: 0,
+                },
+            },
+        );
+        assert_eq!(
+            r,
+            Response::Act {
+                step: 1,
+                action: Action::RotateLeft
+            }
+        );
+    }
+
+    #[test]
+    fn garbage_and_timeouts_recover() {
+        let mut s = Session::new(CFG);
+        let mut sink = Sink(Vec::new());
+        s.feed(&[1, 2, 3, 0], 0, &mut sink).unwrap();
+        s.feed(&[0x55; MAX_FRAME + 3], 0, &mut sink).unwrap();
+        s.feed(&[0], 0, &mut sink).unwrap();
+        let f = frames(&sink.0);
+        assert_eq!(f.len(), 2);
+        assert!(f.iter().all(|(id, _)| *id == NO_ID));
+        assert!(matches!(f[1].1, Response::Error(WireError::Oversized)));
+        call(
+            &mut s,
+            1,
+            &Request::Hello {
+                protocol: PROTOCOL_VERSION,
+            },
+        );
+        call(&mut s, 2, &Request::LoadPlan { vertices: square() });
+        call(&mut s, 3, &Request::StartEpisode(params(50)));
+        assert_eq!(s.phase(), Phase::Episode);
+        assert!(!s.poll(500));
+        assert!(s.poll(5000));
+        assert_eq!(s.phase(), Phase::Closed);
+        assert_eq!(s.stats().timeouts, 1);
+        // The next host starts over.
+        assert!(matches!(
+            call(
+                &mut s,
+                40,
+                &Request::Hello {
+                    protocol: PROTOCOL_VERSION
+                }
+            ),
+            Response::Hello(_)
+        ));
+        assert!(matches!(
+            call(&mut s, 41, &Request::StartEpisode(params(3))),
+            Response::Act { .. }
+        ));
+        assert_eq!(
+            call(&mut s, 42, &Request::Hello { protocol: 99 }),
+            Response::Error(WireError::VersionMismatch {
+                device: PROTOCOL_VERSION
+            })
+        );
+    }
+
+    #[test]
+    fn largest_replies_fit() {
+        let s = Session::new(CFG);
+        let rep = EpisodeReport {
+            end: EpisodeEnd::Aborted,
+            actions: u16::MAX,
+            measurements: u16::MAX,
+            rotations: u16::MAX,
+            no_returns: u16::MAX,
+            cost: f32::MAX,
+            bearing_index: u16::MAX,
+            trace_hash: u32::MAX,
+            coarse: Some(Pose2::new(1.0, 2.0, 3.0)),
+            refined: Some(Pose2::new(1.0, 2.0, 3.0)),
+            cycles: UpdateStats {
+                updates: u32::MAX,
+                total_cycles: u64::MAX,
+                max_cycles: u32::MAX,
+            },
+        };
+        let mut info = s.device_info();
+        info.firmware.clear();
+        info.firmware.push_str("012345678901234567890123").unwrap();
+        info.capabilities = u32::MAX;
+        let st = DeviceStatus {
+            phase: Phase::Episode,
+            plan_vertices: 255,
+            episode_actions: u16::MAX,
+            link: LinkStats {
+                frames_ok: u32::MAX,
+                frames_bad: u32::MAX,
+                sequence_errors: u32::MAX,
+                retransmissions: u32::MAX,
+                timeouts: u32::MAX,
+                episodes: u32::MAX,
+            },
+            cycles: rep.cycles,
+        };
+        for r in [
+            Response::Done(rep),
+            Response::Hello(info),
+            Response::Status(st),
+        ] {
+            let mut buf = [0u8; MAX_REPLY];
+            assert!(encode_frame(u16::MAX, &r, &mut buf).is_ok(), "{r:?}");
+        }
+    }
+}

@@ -1,0 +1,367 @@
+//! The `sim` and `serial` commands of the `activesense` CLI: run episodes against a
+//! remote instrument controller (firmware in QEMU, on a serial port or TCP, or the core
+//! session in a thread) while the host plays the instrument's sensors with the simulated
+//! world.
+//!
+//! Until the GHT localizer and the sparse registration are built into the device, every
+//! episode runs to its action limit and the device reports counts, cost and the trace
+//! fingerprint; `--verify` additionally replays each episode in-process
+//! ([`activesense_core::instrument::run_local`]) and fails unless actions, observations and
+//! report are bit-identical.
+
+use crate::device::{sim_episode, SimInstrument};
+use crate::episode::EpisodeSpec;
+use crate::link::{self, EpisodeRun, Link, LinkSpec};
+use crate::plans::TEST_SEEDS;
+use crate::sensor::SensorModel;
+use crate::world::SimWorld;
+use activesense_core::agents::AgentKind;
+use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
+use activesense_core::instrument::run_local;
+use activesense_core::session::Controller;
+use activesense_core::wire::{EpisodeParams, EpisodeReport};
+use activesense_core::FloorPlan;
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+fn parse_agent(s: &str) -> Result<AgentKind, String> {
+    AgentKind::from_name(s).ok_or_else(|| format!("unknown agent '{s}'"))
+}
+
+/// Episode options shared by `sim` and `serial run`.
+#[derive(Args, Clone, Debug)]
+pub struct RemoteEpisodeArgs {
+    /// Number of episodes (plan seeds first-seed, first-seed+1, ...).
+    #[arg(long, default_value_t = 10)]
+    pub episodes: u32,
+    /// Agent: blind-0..2, heuristic-0..3.
+    #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
+    pub agent: AgentKind,
+    /// Rotation bins: 1 = heading known (sent to the device), 10 = unknown.
+    #[arg(long, default_value_t = 1)]
+    pub rot_bins: u8,
+    /// Action limit per episode.
+    #[arg(long, default_value_t = EVAL_MAX_ACTIONS)]
+    pub max_actions: u16,
+    /// Episode seed (placement, noise and agent randomness).
+    #[arg(long, default_value_t = 0)]
+    pub episode_seed: u64,
+    /// Reply timeout in milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+    /// Replay every episode in-process and require bit-identical results.
+    #[arg(long)]
+    pub verify: bool,
+}
+
+/// `activesense sim`.
+#[derive(Args, Debug)]
+pub struct SimArgs {
+    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
+    #[arg(long, default_value = "loopback")]
+    pub link: LinkSpec,
+    /// First plan seed (default: the first test plan).
+    #[arg(long, default_value_t = TEST_SEEDS.start)]
+    pub first_seed: u32,
+    #[command(flatten)]
+    pub episode: RemoteEpisodeArgs,
+}
+
+/// `activesense serial ...`.
+#[derive(Args, Debug)]
+pub struct SerialArgs {
+    #[command(subcommand)]
+    pub command: SerialCommand,
+}
+
+/// Serial subcommands.
+#[derive(Subcommand, Debug)]
+pub enum SerialCommand {
+    /// List the serial ports of this machine.
+    List,
+    /// Load a plan file into the instrument controller and run episodes in that room.
+    Run(SerialRunArgs),
+}
+
+/// `activesense serial run`.
+#[derive(Args, Debug)]
+pub struct SerialRunArgs {
+    /// Serial device (e.g. /dev/ttyUSB0).
+    #[arg(long)]
+    pub port: String,
+    /// Baud rate.
+    #[arg(long, default_value_t = link::DEFAULT_BAUD)]
+    pub baud: u32,
+    /// Floor-plan JSON: {"vertices": [[x, y], ...]} (metres, any orientation; it is
+    /// re-centred on its perimeter centroid, the model frame).
+    #[arg(long)]
+    pub plan: PathBuf,
+    #[command(flatten)]
+    pub episode: RemoteEpisodeArgs,
+}
+
+fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
+    if a.rot_bins != 1 && a.rot_bins != 10 {
+        bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
+    }
+    Ok(EpisodeSpec {
+        plan_seed,
+        episode_seed: a.episode_seed,
+        agent: a.agent,
+        rot_bins: a.rot_bins,
+        config: EpisodeConfig {
+            steps_per_turn: DEFAULT_STEPS_PER_TURN,
+            max_actions: a.max_actions,
+            ..Default::default()
+        },
+        sensor: SensorModel::default(),
+    })
+}
+
+/// Runs the same episode in-process (reference for `--verify` and the HIL tests).
+pub fn reference_run(
+    plan: &FloorPlan,
+    params: &EpisodeParams,
+    instrument: &mut SimInstrument,
+) -> Result<EpisodeRun> {
+    let mut ctl = Box::new(Controller::new(None));
+    let mut steps = Vec::new();
+    let report = run_local(&mut ctl, plan, params, instrument, |a, o| {
+        steps.push((a, *o))
+    })
+    .map_err(|e| anyhow::anyhow!("in-process reference run failed: {e:?}"))?;
+    Ok(EpisodeRun { steps, report })
+}
+
+/// True when two runs agree bit for bit (cycle statistics excluded: they measure the
+/// machine, not the episode).
+pub fn same_run(a: &EpisodeRun, b: &EpisodeRun) -> bool {
+    let bits = |r: &EpisodeRun| {
+        r.steps
+            .iter()
+            .map(|(act, o)| (*act, o.range.map(f32::to_bits), o.scan))
+            .collect::<Vec<_>>()
+    };
+    let strip = |r: &EpisodeReport| EpisodeReport {
+        cycles: Default::default(),
+        ..*r
+    };
+    bits(a) == bits(b)
+        && strip(&a.report) == strip(&b.report)
+        && a.report.cost.to_bits() == b.report.cost.to_bits()
+}
+
+struct Totals {
+    episodes: u32,
+    actions: u64,
+    measurements: u64,
+    no_returns: u64,
+    cost: f64,
+}
+
+fn print_run(label: &str, run: &EpisodeRun, t: &mut Totals) {
+    let r = &run.report;
+    println!(
+        "{label}: {:?} after {} actions ({} measurements, {} no-return, {} rotations), cost {:.3}, \
+         trace {:08x}, cycles/update mean {} max {}",
+        r.end,
+        r.actions,
+        r.measurements,
+        r.no_returns,
+        r.rotations,
+        r.cost,
+        r.trace_hash,
+        r.cycles.total_cycles / r.cycles.updates.max(1) as u64,
+        r.cycles.max_cycles
+    );
+    t.episodes += 1;
+    t.actions += r.actions as u64;
+    t.measurements += r.measurements as u64;
+    t.no_returns += r.no_returns as u64;
+    t.cost += r.cost as f64;
+}
+
+fn print_totals(t: &Totals, secs: f64) {
+    let n = t.episodes.max(1) as f64;
+    println!(
+        "{} episodes in {:.2} s: mean {:.2} actions, {:.2} measurements, {:.2} no-returns, cost {:.3}",
+        t.episodes,
+        secs,
+        t.actions as f64 / n,
+        t.measurements as f64 / n,
+        t.no_returns as f64 / n,
+        t.cost / n
+    );
+    println!(
+        "pending on the device: GHT localization (episodes end at the action limit, no coarse \
+         pose) and sparse registration (no refined pose)"
+    );
+}
+
+fn run_one(
+    link: &mut Link,
+    plan: &FloorPlan,
+    params: &EpisodeParams,
+    mut inst: SimInstrument,
+    reference: Option<(FloorPlan, EpisodeParams, SimInstrument)>,
+) -> Result<EpisodeRun> {
+    link.client.load_plan(plan).context("loading the plan")?;
+    let run = link
+        .client
+        .run_episode(params, &mut inst)
+        .context("running the episode")?;
+    if run.trace_hash() != run.report.trace_hash {
+        bail!(
+            "trace fingerprint mismatch: host {:08x}, device {:08x}",
+            run.trace_hash(),
+            run.report.trace_hash
+        );
+    }
+    if let Some((p, prm, mut i)) = reference {
+        let local = reference_run(&p, &prm, &mut i)?;
+        if !same_run(&run, &local) {
+            bail!("device run differs from the in-process run");
+        }
+    }
+    Ok(run)
+}
+
+/// `activesense sim`.
+pub fn cmd_sim(a: SimArgs) -> Result<()> {
+    let timeout = Duration::from_millis(a.episode.timeout_ms);
+    let mut link = link::open(&a.link, timeout).with_context(|| format!("opening {:?}", a.link))?;
+    let info = link.client.hello().context("handshake")?;
+    println!(
+        "device: {} (protocol v{}, capabilities {:#x}, max {} vertices, max {} actions)",
+        info.firmware, info.protocol, info.capabilities, info.max_vertices, info.max_actions
+    );
+    let start = Instant::now();
+    let mut t = Totals {
+        episodes: 0,
+        actions: 0,
+        measurements: 0,
+        no_returns: 0,
+        cost: 0.0,
+    };
+    for i in 0..a.episode.episodes {
+        let seed = a.first_seed.wrapping_add(i);
+        let spec = spec_for(seed, &a.episode)?;
+        let (plan, params, inst) = sim_episode(&spec);
+        let reference = a.episode.verify.then(|| sim_episode(&spec));
+        let run = run_one(&mut link, &plan, &params, inst, reference)
+            .with_context(|| format!("episode on plan {seed}"))?;
+        print_run(&format!("plan {seed}"), &run, &mut t);
+    }
+    let status = link.client.status().context("status")?;
+    println!(
+        "link: {} frames ok, {} bad, {} sequence errors, {} retransmissions{}",
+        status.link.frames_ok,
+        status.link.frames_bad,
+        status.link.sequence_errors,
+        status.link.retransmissions,
+        if a.episode.verify {
+            "; every episode verified bit-identical to the in-process run"
+        } else {
+            ""
+        }
+    );
+    print_totals(&t, start.elapsed().as_secs_f64());
+    let out = link.close().context("shutting the device down")?;
+    for line in out.lines().filter(|l| !l.trim().is_empty()) {
+        println!("device console: {line}");
+    }
+    Ok(())
+}
+
+/// Reads a `{"vertices": [[x, y], ...]}` plan file into a model-frame plan.
+pub fn read_plan_file(path: &std::path::Path) -> Result<FloorPlan> {
+    #[derive(serde::Deserialize)]
+    struct PlanFile {
+        vertices: Vec<[f32; 2]>,
+    }
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let f: PlanFile = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{}: expected {{\"vertices\": [[x, y], ...]}}",
+            path.display()
+        )
+    })?;
+    let pts: Vec<_> = f
+        .vertices
+        .iter()
+        .map(|v| activesense_core::geometry::v2(v[0], v[1]))
+        .collect();
+    let plan = FloorPlan::new_any_orientation(&pts)
+        .map_err(|e| anyhow::anyhow!("{}: invalid floor-plan: {e}", path.display()))?;
+    Ok(plan.centered())
+}
+
+/// `activesense serial ...`.
+pub fn cmd_serial(a: SerialArgs) -> Result<()> {
+    match a.command {
+        SerialCommand::List => {
+            let ports = serialport::available_ports().context("listing serial ports")?;
+            if ports.is_empty() {
+                println!("no serial ports found");
+            }
+            for p in ports {
+                println!("{}\t{:?}", p.port_name, p.port_type);
+            }
+            Ok(())
+        }
+        SerialCommand::Run(r) => {
+            let plan = read_plan_file(&r.plan)?;
+            let spec = LinkSpec::Serial {
+                path: r.port.clone(),
+                baud: r.baud,
+            };
+            let timeout = Duration::from_millis(r.episode.timeout_ms);
+            let mut link = link::open(&spec, timeout)?;
+            let info = link
+                .client
+                .hello()
+                .with_context(|| format!("handshake on {}", r.port))?;
+            println!("device: {} (protocol v{})", info.firmware, info.protocol);
+            let mut t = Totals {
+                episodes: 0,
+                actions: 0,
+                measurements: 0,
+                no_returns: 0,
+                cost: 0.0,
+            };
+            let start = Instant::now();
+            for i in 0..r.episode.episodes {
+                let spec = spec_for(0, &r.episode)?;
+                let world_seed = spec.world_seed() ^ i as u64;
+                let mk = || {
+                    let mut world =
+                        SimWorld::new(plan.clone(), spec.sensor, spec.config, world_seed);
+                    let initial_scan = world.scan();
+                    let truth = world.truth();
+                    let params = EpisodeParams {
+                        agent: spec.agent,
+                        seed: spec.agent_seed() ^ i as u64,
+                        steps_per_turn: spec.config.steps_per_turn,
+                        max_actions: spec.config.max_actions,
+                        rot_bins: spec.rot_bins,
+                        known_heading: (spec.rot_bins == 1).then_some(truth.theta),
+                        ground_truth: Some(truth),
+                        initial_scan,
+                    };
+                    (plan.clone(), params, SimInstrument::new(world))
+                };
+                let (p, params, inst) = mk();
+                let reference = r.episode.verify.then(mk);
+                let run = run_one(&mut link, &p, &params, inst, reference)
+                    .with_context(|| format!("episode {i} on {}", r.port))?;
+                print_run(&format!("episode {i}"), &run, &mut t);
+            }
+            print_totals(&t, start.elapsed().as_secs_f64());
+            // A real instrument keeps running: no Shutdown, just leave the session.
+            Ok(())
+        }
+    }
+}

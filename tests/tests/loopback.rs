@@ -1,0 +1,77 @@
+//! In-process loopback: the host client and the core device session (in a thread) over an
+//! in-memory pipe.
+
+use activesense_core::session::{Session, SessionConfig};
+use activesense_core::wire::Phase;
+use activesense_sim::device::{serve_std, Pipe, HOST_DEVICE};
+use activesense_sim::link::{self, Client, LinkSpec};
+use activesense_tests::{check_episodes, fault_suite, spec};
+use std::time::Duration;
+
+#[test]
+fn loopback_episodes_are_bit_identical_to_in_process_runs() {
+    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(5)).unwrap();
+    l.client.hello().unwrap();
+    assert_eq!(check_episodes(&mut l.client, 10, 1), 1000);
+    assert_eq!(check_episodes(&mut l.client, 10, 10), 1000);
+    l.close().unwrap();
+}
+
+#[test]
+fn loopback_fault_suite() {
+    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(5)).unwrap();
+    fault_suite(&mut l.client);
+    check_episodes(&mut l.client, 2, 10);
+    l.close().unwrap();
+}
+
+/// The same device session serves host after host: one that vanishes mid-episode (link
+/// closed), one that goes silent (timeout), then a good one.
+#[test]
+fn device_survives_hosts_that_disappear() {
+    let mut session = Box::new(Session::new(SessionConfig {
+        timeout_ms: 200,
+        ..HOST_DEVICE
+    }));
+    // Host 1 starts an episode and drops the link.
+    let (host, mut dev) = Pipe::pair(Duration::from_secs(5));
+    let t = std::thread::spawn(move || {
+        let mut c = Client::new(host);
+        c.hello().unwrap();
+        let (plan, params, _) = activesense_sim::device::sim_episode(&spec(0, 10));
+        c.load_plan(&plan).unwrap();
+        c.call(&activesense_core::wire::Request::StartEpisode(params))
+            .unwrap();
+    });
+    serve_std(&mut session, &mut dev).unwrap();
+    t.join().unwrap();
+    assert_eq!(session.phase(), Phase::Episode);
+
+    // Host 2 starts an episode and goes silent without closing: the timeout abandons it.
+    let (host, mut dev) = Pipe::pair(Duration::from_secs(5));
+    let t = std::thread::spawn(move || {
+        let mut c = Client::new(host);
+        c.hello().unwrap();
+        let (plan, params, _) = activesense_sim::device::sim_episode(&spec(1, 1));
+        c.load_plan(&plan).unwrap();
+        c.call(&activesense_core::wire::Request::StartEpisode(params))
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(600));
+    });
+    serve_std(&mut session, &mut dev).unwrap();
+    t.join().unwrap();
+    assert_eq!(session.phase(), activesense_core::wire::Phase::Closed);
+    assert_eq!(session.stats().timeouts, 1);
+
+    // Host 3 is served normally.
+    let (host, mut dev) = Pipe::pair(Duration::from_secs(5));
+    let t = std::thread::spawn(move || {
+        let mut c = Client::new(host);
+        c.hello().unwrap();
+        check_episodes(&mut c, 2, 10);
+        c.shutdown().unwrap();
+    });
+    serve_std(&mut session, &mut dev).unwrap();
+    t.join().unwrap();
+    assert_eq!(session.stats().episodes, 2);
+}
