@@ -23,6 +23,7 @@
 //! | [`registration`] | 3.3 (Sparse ICP, Algorithm 4, equation 6; annealed perturbation, Algorithm 3) |
 //! | [`symmetry`] | 3.4 (edge-chain rotational-symmetry detection, Wolter et al. 1985) |
 //! | [`pose_distance`] | 3.4 (symmetry-aware pose distance, Table 2, equations 7–10) |
+//! | [`pipeline`] | Fig. 1, 3.1–3.3 (one episode's chain: localize, terminate, refine) |
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -34,6 +35,7 @@ pub mod geometry;
 pub mod instrument;
 pub mod localization;
 pub mod math;
+pub mod pipeline;
 pub mod pose_distance;
 pub mod registration;
 pub mod session;

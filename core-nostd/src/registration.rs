@@ -174,7 +174,7 @@ pub struct Observations {
 
 impl Observations {
     /// An empty set.
-    pub fn new() -> Self {
+    pub const fn new() -> Self {
         Observations { pts: HVec::new() }
     }
 

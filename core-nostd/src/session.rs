@@ -22,17 +22,17 @@
 //! **Memory.** [`Session::new`] is a `const fn`, so the firmware places the whole state
 //! (≈ 7 KiB: frame buffer, plan, measurement log) in a `static`.
 //!
-//! **Integration points (pending).** The GHT localizer (`crate::localization`) plugs into
-//! [`Controller::observe`] (vote each measurement) and [`Controller::next_step`] (end the
-//! episode with [`EpisodeEnd::Localized`] once it succeeds, fill `coarse`); the sparse
-//! registration fills `refined` from [`Controller::measurements`] when the episode ends.
-//! Until then every episode runs to its action limit and reports counts, cost and the
-//! trace fingerprint.
+//! **Decisions.** The controller drives a [`Pipeline`] (the same one the host simulator
+//! runs): every returned range is voted into the GHT localizer in [`Controller::observe`];
+//! [`Controller::next_step`] ends the episode with [`EpisodeEnd::Localized`] when the
+//! termination rule fires, and at the end of every episode reports the coarse (belief
+//! argmax) and refined (sparse registration) AgentPoses.
 
 use crate::agents::{Action, BaselineAgent};
 use crate::episode::{EpisodeConfig, EpisodeState, Observation, SCAN_PIXELS};
 use crate::floorplan::{FloorPlan, PlanError, MAX_VERTICES};
 use crate::geometry::v2;
+use crate::pipeline::{registration_seed, Pipeline, PipelineError, PipelineParams};
 use crate::wire::*;
 use embedded_io::{Read, Write};
 use heapless::{String as HString, Vec as HVec};
@@ -77,6 +77,7 @@ struct Running {
     trace: TraceHash,
     cycles: UpdateStats,
     update_start: u32,
+    stop: bool,
 }
 
 /// The device's decision maker for one plan and one episode at a time.
@@ -86,6 +87,7 @@ pub struct Controller {
     measurements: HVec<Measurement, MAX_MEASUREMENTS>,
     cycles: UpdateStats,
     clock: Option<fn() -> u32>,
+    pipeline: Pipeline,
 }
 
 impl Controller {
@@ -102,6 +104,7 @@ impl Controller {
                 max_cycles: 0,
             },
             clock,
+            pipeline: Pipeline::new_empty(),
         }
     }
 
@@ -193,6 +196,21 @@ impl Controller {
             max_actions: p.max_actions,
             ..EpisodeConfig::default()
         };
+        let plan = self.plan.as_ref().ok_or(WireError::NoPlan)?;
+        let pp = PipelineParams {
+            rot_bins: p.rot_bins,
+            known_heading: p.known_heading,
+            ground_truth: p.ground_truth,
+            termination: p.termination,
+            registration_seed: registration_seed(p.seed),
+        };
+        self.pipeline.start(plan, &pp).map_err(|e| {
+            WireError::InvalidParams(match e {
+                PipelineError::KnownHeadingRequired => ParamError::KnownHeadingRequired,
+                PipelineError::GroundTruthRequired => ParamError::GroundTruthRequired,
+                PipelineError::Localizer(_) => ParamError::PlanNotLocalizable,
+            })
+        })?;
         self.measurements.clear();
         self.running = Some(Running {
             params: *p,
@@ -205,12 +223,14 @@ impl Controller {
             trace: TraceHash::new(),
             cycles: UpdateStats::default(),
             update_start: self.now(),
+            stop: false,
         });
         Ok(())
     }
 
     fn report(r: &Running, end: EpisodeEnd) -> EpisodeReport {
         EpisodeReport {
+            recognised: None,
             end,
             actions: r.state.actions,
             measurements: r.state.measurements,
@@ -236,9 +256,7 @@ impl Controller {
                 action,
             });
         }
-        // Pending integration: the localizer's success test ends the episode here with
-        // EpisodeEnd::Localized and the coarse pose.
-        let step = if r.state.exhausted() {
+        let step = if r.stop || r.state.exhausted() {
             None
         } else {
             let action = r.agent.next_action();
@@ -256,8 +274,19 @@ impl Controller {
         match step {
             Some(s) => Some(s),
             None => {
-                let rep = Self::report(r, EpisodeEnd::ActionLimit);
+                let end = if r.stop {
+                    EpisodeEnd::Localized
+                } else {
+                    EpisodeEnd::ActionLimit
+                };
+                let mut rep = Self::report(r, end);
                 self.running = None;
+                if let Some(plan) = self.plan.as_ref() {
+                    let result = self.pipeline.finish(plan);
+                    rep.coarse = result.coarse;
+                    rep.refined = result.refined.map(|x| x.pose);
+                    rep.recognised = result.recognised;
+                }
                 Some(Step::Done(rep))
             }
         }
@@ -303,11 +332,12 @@ impl Controller {
                         bearing: r.state.bearing(),
                         range,
                     });
+                    self.pipeline.measure(r.state.bearing(), range);
+                    r.stop = self.pipeline.should_stop().is_some();
                 }
                 None => r.no_returns = r.no_returns.saturating_add(1),
             }
         }
-        // Pending integration: vote (bearing, range) into the GHT accumulator here.
         let _ = &r.params;
         Ok(())
     }
@@ -399,14 +429,23 @@ impl Session {
                 break;
             }
         }
-        let mut capabilities = CAP_BASELINE_AGENTS | CAP_GROUND_TRUTH | CAP_SHUTDOWN;
+        let mut capabilities = CAP_BASELINE_AGENTS
+            | CAP_GROUND_TRUTH
+            | CAP_SHUTDOWN
+            | CAP_LOCALIZATION
+            | CAP_REGISTRATION;
         if self.config.cycle_clock.is_some() {
             capabilities |= CAP_CYCLE_COUNTS;
         }
         DeviceInfo {
             protocol: PROTOCOL_VERSION,
             firmware,
-            grid: GridInfo::default(),
+            // Cell size depends on the loaded plan (the grid spans its extent): 0 here.
+            grid: GridInfo {
+                cells_x: crate::localization::MAX_NX as u16,
+                cells_y: crate::localization::MAX_NY as u16,
+                cell_mm: 0,
+            },
             max_vertices: MAX_VERTICES as u8,
             max_actions: MAX_EPISODE_ACTIONS,
             max_rot_bins: MAX_ROT_BINS,
@@ -738,6 +777,7 @@ mod tests {
             known_heading: None,
             ground_truth: Some(Pose2::new(0.5, 0.2, 0.3)),
             initial_scan: 0,
+            termination: Termination::ActionLimit,
         }
     }
 
@@ -967,6 +1007,7 @@ mod tests {
             trace_hash: u32::MAX,
             coarse: Some(Pose2::new(1.0, 2.0, 3.0)),
             refined: Some(Pose2::new(1.0, 2.0, 3.0)),
+            recognised: Some(true),
             cycles: UpdateStats {
                 updates: u32::MAX,
                 total_cycles: u64::MAX,

@@ -20,6 +20,7 @@ use crate::agents::{Action, AgentKind};
 use crate::episode::Observation;
 use crate::floorplan::PlanError;
 use crate::geometry::Pose2;
+pub use crate::pipeline::Termination;
 use heapless::{String as HString, Vec as HVec};
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
@@ -152,6 +153,8 @@ pub struct EpisodeParams {
     pub ground_truth: Option<Pose2>,
     /// The instrument's topological scan before the first action.
     pub initial_scan: u32,
+    /// When the episode stops early ([`Termination::Oracle`] needs `ground_truth`).
+    pub termination: Termination,
 }
 
 /// Static description of the device, sent in answer to `Hello`.
@@ -249,10 +252,14 @@ pub struct EpisodeReport {
     pub bearing_index: u16,
     /// CRC-32 over the episode's (action, observation) stream, see [`TraceHash`].
     pub trace_hash: u32,
-    /// Coarse AgentPose from the GHT localizer (`None` until it is built in).
+    /// Coarse AgentPose from the GHT localizer (the belief argmax; `None` when no
+    /// measurement returned).
     pub coarse: Option<Pose2>,
-    /// Refined AgentPose from the sparse registration (`None` until it is built in).
+    /// Refined AgentPose from the sparse registration (`None` with fewer than two
+    /// measurements).
     pub refined: Option<Pose2>,
+    /// Coarse success against the ground truth, when one was supplied.
+    pub recognised: Option<bool>,
     /// Cycle statistics of this episode's updates.
     pub cycles: UpdateStats,
 }
@@ -315,6 +322,11 @@ pub enum ParamError {
     NonFinite,
     /// The ground-truth position lies outside the plan.
     GroundTruthOutside,
+    /// Oracle termination without a ground truth.
+    GroundTruthRequired,
+    /// The localizer cannot take this plan (not centred on its perimeter centroid, or
+    /// more perimeter than its R-table holds).
+    PlanNotLocalizable,
 }
 
 /// Why an observation was rejected (the episode stays at the same step).

@@ -92,6 +92,7 @@ pub fn sim_episode(spec: &EpisodeSpec) -> (FloorPlan, EpisodeParams, SimInstrume
         known_heading: (spec.rot_bins == 1).then_some(truth.theta),
         ground_truth: Some(truth),
         initial_scan,
+        termination: spec.termination,
     };
     (plan, params, SimInstrument::new(world))
 }

@@ -17,10 +17,10 @@ use crate::sensor::{RangeKind, SensorModel};
 use crate::world::{Placement, SimWorld};
 use activesense_core::agents::{Action, AgentKind, BaselineAgent};
 use activesense_core::episode::{EpisodeConfig, EpisodeState};
-use activesense_core::localization::{Confidence, GhtLocalizer, LocalizerConfig};
+pub use activesense_core::pipeline::Termination;
+use activesense_core::pipeline::{self, Pipeline, PipelineParams, Stop};
 use activesense_core::pose_distance::PoseDistance;
-use activesense_core::registration::{self, AnnealParams, Measurement, Observations, Registration};
-use activesense_core::symmetry::{symmetry_order, SymmetryTolerance};
+use activesense_core::registration::Registration;
 use activesense_core::{FloorPlan, Pose2};
 use serde::{Deserialize, Serialize};
 
@@ -43,18 +43,6 @@ pub struct EpisodeSpec {
     pub termination: Termination,
 }
 
-/// When an episode stops (besides the action limit).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum Termination {
-    /// On coarse success against the ground truth (the paper's rule; simulation only).
-    Oracle,
-    /// When the belief is confident (peak mass / entropy thresholds); no ground truth used.
-    Confident,
-    /// Never: run to the action limit.
-    ActionLimit,
-}
-
 impl EpisodeSpec {
     /// Evaluation defaults (Table 4): 100 actions, 2π/54 rotation step, default sensor.
     pub fn new(plan_seed: u32, agent: AgentKind) -> Self {
@@ -69,11 +57,10 @@ impl EpisodeSpec {
         }
     }
 
-    /// Seed of the registration's perturbation stream.
+    /// Seed of the registration's perturbation stream (derived from the agent seed, which
+    /// is all the device is told).
     pub fn registration_seed(&self) -> u64 {
-        splitmix64(
-            splitmix64(self.plan_seed as u64 ^ 0x1c9) ^ self.episode_seed ^ self.rot_bins as u64,
-        )
+        pipeline::registration_seed(self.agent_seed())
     }
 
     /// Seed of the world stream.
@@ -178,6 +165,18 @@ pub struct Trajectory {
     pub outcome: Outcome,
 }
 
+/// The pipeline parameters of an episode (the ground truth is supplied for the oracle
+/// rule and the `recognised` statistic; K = 1 is told the true heading).
+pub fn pipeline_params(spec: &EpisodeSpec, truth: &Pose2) -> PipelineParams {
+    PipelineParams {
+        rot_bins: spec.rot_bins,
+        known_heading: (spec.rot_bins <= 1).then_some(truth.theta),
+        ground_truth: Some(*truth),
+        termination: spec.termination,
+        registration_seed: spec.registration_seed(),
+    }
+}
+
 /// Runs one episode to its end, registers, scores and records it.
 pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
     let plan = plans::generate(spec.plan_seed);
@@ -185,30 +184,22 @@ pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
     let truth = world.truth();
     let mut agent = BaselineAgent::new(spec.agent, spec.agent_seed());
     let mut state = EpisodeState::new(spec.config);
-    let order = symmetry_order(&plan, &SymmetryTolerance::default());
-    let loc_cfg = localizer_config(spec.rot_bins, truth.theta);
-    let mut loc = Box::new(GhtLocalizer::new_empty());
-    // Generated plans are valid, centred and within the R-table capacity (tested), so a
-    // failure here is a bug, not bad input.
-    loc.reset(&plan, &loc_cfg)
-        .expect("generated plan fits the localizer");
-    let mut observations = Observations::new();
+    let mut pipe = Box::new(Pipeline::new_empty());
+    // Generated plans are valid, centred and within the R-table capacity (tested), and the
+    // parameters are complete by construction, so a failure here is a bug, not bad input.
+    pipe.start(&plan, &pipeline_params(spec, &truth))
+        .expect("generated plan fits the pipeline");
     let initial_scan = world.scan();
     let mut steps = Vec::with_capacity(spec.config.max_actions as usize);
     let mut end = EndReason::ActionLimit;
-    let mut voted = false;
     while !state.exhausted() {
         let action = agent.next_action();
         state.apply(action);
         let (obs, step_truth) = world.act(action);
         if let Some(range) = obs.range {
-            // Out-of-range readings (e.g. a 0 m outlier) are refused by the localizer and
-            // the registration buffer alike; the episode goes on.
-            if loc.update(state.bearing(), range).is_ok() {
-                voted = true;
-                let _ = observations.push(Measurement::new(state.bearing(), range));
-            }
+            pipe.measure(state.bearing(), range);
         }
+        let loc = pipe.localizer();
         steps.push(StepRecord {
             step: state.actions - 1,
             action,
@@ -220,25 +211,42 @@ pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
             world_bearing: step_truth.world_bearing,
             cost: state.cost,
             entropy: loc.entropy(),
-            argmax: if voted { loc.estimate() } else { None },
+            argmax: if pipe.has_belief() {
+                loc.estimate()
+            } else {
+                None
+            },
         });
-        if action == Action::Measure && voted {
-            let stop = match spec.termination {
-                Termination::Oracle => loc
-                    .coarse_success(&truth, order)
-                    .then_some(EndReason::CoarseSuccess),
-                Termination::Confident => loc
-                    .is_confident(&Confidence::default(), order)
-                    .then_some(EndReason::Confident),
-                Termination::ActionLimit => None,
-            };
-            if let Some(reason) = stop {
-                end = reason;
+        if action == Action::Measure {
+            if let Some(stop) = pipe.should_stop() {
+                end = match stop {
+                    Stop::CoarseSuccess => EndReason::CoarseSuccess,
+                    Stop::Confident => EndReason::Confident,
+                };
                 break;
             }
         }
     }
-    let outcome = score(&plan, &loc, voted, &observations, &truth, order, spec);
+    let result = pipe.finish(&plan);
+    let distance = PoseDistance::with_order(&plan, result.symmetry_order);
+    let err = |p: Pose2| distance.agent_distance(&p, &truth);
+    let outcome = Outcome {
+        recognised: result.recognised.unwrap_or(false),
+        symmetry_order: result.symmetry_order,
+        coarse: result.coarse,
+        coarse_error: result.coarse.map(err),
+        refined: result.refined,
+        // Without a registration (fewer than 2 measurements) the pipeline's answer is
+        // the coarse estimate, and that is what gets scored.
+        pose_error: result.best().map(err),
+        registration_note: result.registration_error.map(|e| {
+            if result.coarse.is_some() {
+                format!("registration not possible ({e:?}); coarse estimate used")
+            } else {
+                "no measurement returned: nothing to register".to_string()
+            }
+        }),
+    };
     Trajectory {
         spec: spec.clone(),
         truth,
@@ -252,105 +260,29 @@ pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
     }
 }
 
-/// The localizer configuration for `rot_bins` (1 = heading known and given).
-pub fn localizer_config(rot_bins: u8, true_heading: f32) -> LocalizerConfig {
-    if rot_bins <= 1 {
-        LocalizerConfig::known_heading(true_heading)
-    } else {
-        LocalizerConfig {
-            rot_bins,
-            ..LocalizerConfig::DEFAULT
-        }
-    }
+/// Command-line parser for `--termination` (shared by every subcommand).
+pub fn parse_termination(s: &str) -> Result<Termination, String> {
+    [
+        Termination::Oracle,
+        Termination::Confident,
+        Termination::ActionLimit,
+    ]
+    .into_iter()
+    .find(|t| t.name() == s)
+    .ok_or_else(|| {
+        format!("unknown termination '{s}' (expected oracle, confident or action-limit)")
+    })
 }
 
-/// Radius of the registration's trust region around the coarse estimate, in grid cells.
-/// Coarse success guarantees the truth within 1.5 cells per axis of the argmax cell centre,
-/// but with 2–3 measurements the registration is often underdetermined and drifts to the
-/// region's edge; on 300 test plans (heuristic-1, blind-0) a radius of 1 cell gave a mean
-/// recognised pose error of 0.12 m vs 0.17 m at 2.1 cells and 0.68 m unbounded, with the
-/// same ≈1.2 cm median (`activesense eval --agents heuristic-1,blind-0 --plans 300`).
-pub const TRUST_CELLS: f32 = 1.0;
-
-/// Registration parameters for an episode: the heading stays fixed when it is known, and
-/// the result stays within [`TRUST_CELLS`] of the coarse estimate and within 1.5 rotation
-/// bins of its heading (coarse success bounds the heading error by that).
-pub fn registration_params(spec: &EpisodeSpec, loc: &GhtLocalizer) -> AnnealParams {
-    let mut p = AnnealParams {
-        seed: spec.registration_seed(),
-        ..AnnealParams::default()
-    };
-    let grid = loc.grid();
-    let cell = grid.cell[0].max(grid.cell[1]);
-    p.icp.fixed_heading = spec.rot_bins <= 1;
-    p.icp.trust_translation = TRUST_CELLS * cell;
-    p.icp.trust_rotation = if spec.rot_bins <= 1 {
-        f32::INFINITY
-    } else {
-        1.5 * grid.bin_width()
-    };
-    p
-}
-
-/// Heading starts of the registration sweep when the heading is unknown.
-pub const REGISTRATION_STARTS: u8 = 9;
-
-/// Half-width of the registration's heading sweep: the trust region's heading bound.
-pub fn registration_heading_span(spec: &EpisodeSpec, loc: &GhtLocalizer) -> f32 {
-    if spec.rot_bins <= 1 {
-        0.0
-    } else {
-        1.5 * loc.grid().bin_width()
-    }
-}
-
-fn score(
-    plan: &FloorPlan,
-    loc: &GhtLocalizer,
-    voted: bool,
-    observations: &Observations,
-    truth: &Pose2,
-    order: u8,
-    spec: &EpisodeSpec,
-) -> Outcome {
-    let distance = PoseDistance::with_order(plan, order);
-    let coarse = if voted { loc.estimate() } else { None };
-    let mut out = Outcome {
-        recognised: voted && loc.coarse_success(truth, order),
-        symmetry_order: order,
-        coarse,
-        coarse_error: coarse.map(|c| distance.agent_distance(&c, truth)),
-        refined: None,
-        pose_error: None,
-        registration_note: None,
-    };
-    match coarse {
-        None => out.registration_note = Some("no measurement returned: nothing to register".into()),
-        Some(c) => {
-            match registration::register_multistart(
-                plan,
-                observations,
-                &c,
-                &registration_params(spec, loc),
-                registration_heading_span(spec, loc),
-                REGISTRATION_STARTS,
-            ) {
-                Ok(r) => {
-                    out.pose_error = Some(distance.agent_distance(&r.pose, truth));
-                    out.refined = Some(r);
-                }
-                // Too few measurements (or none usable): the pipeline's answer is the coarse
-                // estimate, and that is what gets scored.
-                Err(e) => {
-                    out.pose_error = out.coarse_error;
-                    out.registration_note = Some(format!(
-                        "registration not possible ({e:?}); coarse estimate used"
-                    ));
-                }
-            }
-        }
-    }
-    out
+/// Command-line parser for `--agent` (shared by every subcommand).
+pub fn parse_agent(s: &str) -> Result<AgentKind, String> {
+    AgentKind::from_name(s).ok_or_else(|| {
+        let names: Vec<_> = AgentKind::ALL.iter().map(|a| a.name()).collect();
+        format!(
+            "unknown agent '{s}' (expected one of: {})",
+            names.join(", ")
+        )
+    })
 }
 
 /// Renders a scan bit mask as 20 characters, pixel 0 (clockwise edge) on the right so the

@@ -3,7 +3,9 @@
 
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
-use activesense_sim::episode::{run_episode, scan_string, EpisodeSpec};
+use activesense_sim::episode::{
+    parse_agent, parse_termination, run_episode, scan_string, EpisodeSpec,
+};
 use activesense_sim::plans::{self, Family};
 use activesense_sim::sensor::SensorModel;
 use activesense_sim::svg::{self, Scene};
@@ -108,7 +110,7 @@ struct EvalArgs {
     max_actions: u16,
     /// When an episode stops: coarse success against the ground truth (the paper), or a
     /// confident belief (no ground truth), or only the action limit.
-    #[arg(long, value_enum, default_value = "oracle")]
+    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
     termination: activesense_sim::episode::Termination,
     #[command(flatten)]
     sensor: SensorArgs,
@@ -242,7 +244,7 @@ struct EpisodeArgs {
     sensor: SensorArgs,
     /// When to stop: on coarse success against the ground truth (paper), on a confident
     /// belief (no ground truth), or only at the action limit.
-    #[arg(long, value_enum, default_value = "oracle")]
+    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
     termination: activesense_sim::episode::Termination,
     /// Write the full trajectory as JSON here.
     #[arg(long)]
@@ -253,16 +255,6 @@ struct EpisodeArgs {
     /// Print only the summary, not every step.
     #[arg(long)]
     quiet: bool,
-}
-
-fn parse_agent(s: &str) -> Result<AgentKind, String> {
-    AgentKind::from_name(s).ok_or_else(|| {
-        let names: Vec<_> = AgentKind::ALL.iter().map(|a| a.name()).collect();
-        format!(
-            "unknown agent '{s}' (expected one of: {})",
-            names.join(", ")
-        )
-    })
 }
 
 fn main() -> ExitCode {

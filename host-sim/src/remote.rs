@@ -10,7 +10,7 @@
 //! report are bit-identical.
 
 use crate::device::{sim_episode, SimInstrument};
-use crate::episode::EpisodeSpec;
+use crate::episode::{parse_agent, parse_termination, EpisodeSpec};
 use crate::link::{self, EpisodeRun, Link, LinkSpec};
 use crate::plans::TEST_SEEDS;
 use crate::sensor::SensorModel;
@@ -25,10 +25,6 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-
-fn parse_agent(s: &str) -> Result<AgentKind, String> {
-    AgentKind::from_name(s).ok_or_else(|| format!("unknown agent '{s}'"))
-}
 
 /// Episode options shared by `sim` and `serial run`.
 #[derive(Args, Clone, Debug)]
@@ -48,6 +44,10 @@ pub struct RemoteEpisodeArgs {
     /// Episode seed (placement, noise and agent randomness).
     #[arg(long, default_value_t = 0)]
     pub episode_seed: u64,
+    /// When the device stops an episode: on coarse success against the simulated ground
+    /// truth (oracle, the paper's rule), when its belief is confident, or at the action limit.
+    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    pub termination: activesense_core::pipeline::Termination,
     /// Reply timeout in milliseconds.
     #[arg(long, default_value_t = 5000)]
     pub timeout_ms: u64,
@@ -117,6 +117,7 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
             ..Default::default()
         },
         sensor: SensorModel::default(),
+        termination: a.termination,
     })
 }
 
@@ -350,6 +351,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                         known_heading: (spec.rot_bins == 1).then_some(truth.theta),
                         ground_truth: Some(truth),
                         initial_scan,
+                        termination: spec.termination,
                     };
                     (plan.clone(), params, SimInstrument::new(world))
                 };

@@ -10,7 +10,7 @@ use activesense_core::episode::Observation;
 use activesense_core::floorplan::PlanError;
 use activesense_core::wire::*;
 use activesense_sim::device::sim_episode;
-use activesense_sim::episode::{run_episode, EpisodeSpec};
+use activesense_sim::episode::{run_episode, EndReason, EpisodeSpec};
 use activesense_sim::link::{Client, LinkError};
 use activesense_sim::plans::TEST_SEEDS;
 use activesense_sim::remote::{reference_run, same_run};
@@ -62,7 +62,37 @@ pub fn check_episodes<T: Read + Write>(client: &mut Client<T>, n: u32, rot_bins:
         assert_eq!(run.report.actions, traj.summary.actions);
         assert_eq!(run.report.measurements, traj.summary.measurements);
         assert_eq!(run.report.cost.to_bits(), traj.summary.cost.to_bits());
-        assert_eq!(run.report.end, EpisodeEnd::ActionLimit);
+        let host_end = match traj.end {
+            EndReason::CoarseSuccess | EndReason::Confident => EpisodeEnd::Localized,
+            EndReason::ActionLimit => EpisodeEnd::ActionLimit,
+        };
+        assert_eq!(
+            run.report.end, host_end,
+            "episode {i} K={rot_bins}: end reason"
+        );
+        // The results, not only the actions: coarse and refined AgentPoses bit for bit.
+        let bits = |p: Option<activesense_core::Pose2>| {
+            p.map(|p| [p.x.to_bits(), p.y.to_bits(), p.theta.to_bits()])
+        };
+        assert_eq!(
+            bits(run.report.coarse),
+            bits(traj.outcome.coarse),
+            "episode {i}: coarse pose"
+        );
+        assert_eq!(
+            bits(run.report.refined),
+            bits(traj.outcome.refined.map(|r| r.pose)),
+            "episode {i}: refined pose"
+        );
+        assert_eq!(
+            run.report.recognised,
+            Some(traj.outcome.recognised),
+            "episode {i}: recognised"
+        );
+        assert!(
+            run.report.coarse.is_some(),
+            "episode {i}: the device localized nothing"
+        );
         steps += run.steps.len();
     }
     steps
