@@ -8,8 +8,9 @@
 //!
 //! - **Localization** (§3.2): a [`GhtLocalizer`] with K rotation bins; K = 1 means the
 //!   heading is known and supplied.
-//! - **Termination** (§3.1): [`Termination::Oracle`] stops on coarse success against a
-//!   supplied ground truth (the paper's rule, simulation only); [`Termination::Confident`]
+//! - **Termination** (§3.1): never before the registration is determined
+//!   ([`Pipeline::min_measurements`]); then [`Termination::Oracle`] stops on coarse success
+//!   against a supplied ground truth (the paper's rule, simulation only); [`Termination::Confident`]
 //!   stops when the belief is confident (no ground truth); [`Termination::ActionLimit`]
 //!   never stops early.
 //! - **Refinement** (§3.3): annealed sparse ICP ([`registration::register_multistart`])
@@ -58,6 +59,11 @@ impl Termination {
 /// recognised pose error of 0.12 m vs 0.17 m at 2.1 cells and 0.68 m unbounded, with the
 /// same ≈ 1.2 cm median (`activesense eval --agents heuristic-1,blind-0 --plans 300`).
 pub const TRUST_CELLS: f32 = 1.0;
+
+/// Fewest measurements before stopping when the heading is known (2 translation unknowns).
+pub const MIN_MEASUREMENTS_KNOWN_HEADING: usize = 2;
+/// Fewest measurements before stopping when the heading is unknown (3 unknowns).
+pub const MIN_MEASUREMENTS_UNKNOWN_HEADING: usize = 3;
 
 /// Heading starts of the registration sweep when the heading is unknown.
 pub const REGISTRATION_STARTS: u8 = 9;
@@ -207,7 +213,7 @@ impl Pipeline {
 
     /// After a measurement: should the episode stop?
     pub fn should_stop(&self) -> Option<Stop> {
-        if !self.voted {
+        if !self.voted || self.observations.len() < self.min_measurements() {
             return None;
         }
         match self.params.termination {
@@ -221,6 +227,19 @@ impl Pipeline {
                 .is_confident(&Confidence::default(), self.order)
                 .then_some(Stop::Confident),
             Termination::ActionLimit => None,
+        }
+    }
+
+    /// Fewest measurements before the episode may stop: as many as the registration has
+    /// unknowns (2 with the heading known, 3 without). Stopping on a lucky coarse success
+    /// after one measurement leaves nothing to refine; on 300 test plans this rule took
+    /// heuristic-1 from 2.88 to 3.04 measurements (K = 1) and cut its mean recognised pose
+    /// error from 0.157 m to 0.121 m (K = 1) and from 0.433 m to 0.310 m (K = 10).
+    pub fn min_measurements(&self) -> usize {
+        if self.params.rot_bins <= 1 {
+            MIN_MEASUREMENTS_KNOWN_HEADING
+        } else {
+            MIN_MEASUREMENTS_UNKNOWN_HEADING
         }
     }
 

@@ -373,6 +373,14 @@ impl GhtLocalizer {
             .is_some_and(|c| self.grid.coarse_success(c, truth, symmetry_order))
     }
 
+    /// [`GhtLocalizer::coarse_success`] with an explicit translation tolerance (cells).
+    pub fn coarse_success_within(&self, truth: &Pose2, symmetry_order: u8, tolerance: i16) -> bool {
+        self.argmax().is_some_and(|c| {
+            self.grid
+                .coarse_success_within(c, truth, symmetry_order, tolerance)
+        })
+    }
+
     /// PMF mass within the coarse tolerance of the argmax and its C_n equivalents.
     pub fn peak_mass(&self, symmetry_order: u8) -> f32 {
         match self.argmax() {

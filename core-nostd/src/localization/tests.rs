@@ -199,7 +199,7 @@ fn noise_free_true_cell_is_argmax_known_heading() {
         feed(&mut l, &p, &truth, 8);
         let want = l.grid().cell_of_pose(&truth).unwrap();
         let got = l.argmax().unwrap();
-        assert!(l.coarse_success(&truth, 1));
+        assert!(l.coarse_success_within(&truth, 1, 1));
         if clear_of_cell_edges(l.grid(), &truth) {
             assert_eq!(got, want, "truth {truth:?}");
             exact += 1;
@@ -234,7 +234,7 @@ fn noise_free_true_cell_is_argmax_ten_bins() {
             "{got:?} vs {want:?} truth {truth:?} modes {:?}",
             l.top_modes::<3>(2)
         );
-        assert!(l.coarse_success(&truth, 1));
+        assert!(l.coarse_success_within(&truth, 1, 1));
         // a heading that coincides with a rotation hypothesis (bin 3, sub-bin 1 of 4):
         // the argmax is exactly the true cell
         let h = 3.0 * TAU / 10.0 - TAU / 20.0 + 1.5 * TAU / 40.0;
@@ -242,7 +242,7 @@ fn noise_free_true_cell_is_argmax_ten_bins() {
         l.clear();
         feed(&mut l, &p, &truth, 10);
         let want = l.grid().cell_of_pose(&truth).unwrap();
-        assert!(l.coarse_success(&truth, 1));
+        assert!(l.coarse_success_within(&truth, 1, 1));
         if clear_of_cell_edges(l.grid(), &truth) {
             assert_eq!(l.argmax().unwrap(), want, "truth {truth:?}");
             exact += 1;
@@ -294,7 +294,7 @@ fn thirty_percent_outliers_still_localize() {
                 let truth = Pose2::new(truth.x, truth.y, truth.theta + 0.37 * t as f32);
                 l.set_known_heading(truth.theta);
                 feed_noisy(&mut l, &p, &truth, 20, 0.3, &mut rng);
-                ok += l.coarse_success(&truth, 1) as usize;
+                ok += l.coarse_success_within(&truth, 1, 1) as usize;
                 trials += 1;
             }
         }
@@ -317,7 +317,7 @@ fn outliers_cannot_zero_the_belief() {
     // non-destructive: no weight ever decreases, so the true cell keeps its votes
     assert!(l.weights().iter().zip(&snapshot).all(|(a, b)| a >= b));
     assert!(l.weights()[l.grid().index(c)] >= before);
-    assert!(l.coarse_success(&truth, 1));
+    assert!(l.coarse_success_within(&truth, 1, 1));
 }
 
 #[test]
@@ -383,7 +383,7 @@ fn entropy_and_confidence_follow_evidence() {
         l.peak_mass(1),
         l.entropy()
     );
-    assert!(l.coarse_success(&truth, 1));
+    assert!(l.coarse_success_within(&truth, 1, 1));
 }
 
 /// The modes of `l`, at least `n`, as the set of distinct AgentPoses they stand for.
@@ -409,7 +409,7 @@ fn square_keeps_four_equal_modes_k8() {
         let rel = m[k].mass / top;
         assert!(rel > 0.98, "mode {k}: {:?} rel {rel}", m[k]);
         // each is a C4 equivalent of the truth, and together they cover all four
-        assert!(l.grid().coarse_success(m[k].cell, &truth, 4));
+        assert!(l.grid().coarse_success_within(m[k].cell, &truth, 4, 1));
     }
     for k in 0..4 {
         let phi = k as f32 * PI / 2.0;
@@ -421,14 +421,14 @@ fn square_keeps_four_equal_modes_k8() {
         assert_eq!(
             m[..4]
                 .iter()
-                .filter(|x| l.grid().coarse_success(x.cell, &eq, 1))
+                .filter(|x| l.grid().coarse_success_within(x.cell, &eq, 1, 1))
                 .count(),
             1,
             "equivalent {k}"
         );
     }
     assert!(m[4].mass < 0.7 * top, "fifth mode {:?}", m[4]);
-    assert!(l.coarse_success(&truth, 4));
+    assert!(l.coarse_success_within(&truth, 4, 1));
 }
 
 /// Square, K = 10 (default): 90° = 2.5 bins, so the equivalents fall at different offsets
@@ -446,15 +446,18 @@ fn square_keeps_four_modes_k10() {
         for (k, h) in hit.iter_mut().enumerate() {
             let phi = k as f32 * PI / 2.0;
             let a = rotate(truth.translation(), phi);
-            if l.grid()
-                .coarse_success(x.cell, &Pose2::new(a.x, a.y, truth.theta + phi), 1)
-            {
+            if l.grid().coarse_success_within(
+                x.cell,
+                &Pose2::new(a.x, a.y, truth.theta + phi),
+                1,
+                1,
+            ) {
                 *h = true;
             }
         }
     }
     assert_eq!(hit, [true; 4]);
-    assert!(l.coarse_success(&truth, 4));
+    assert!(l.coarse_success_within(&truth, 4, 1));
 }
 
 /// Square, K = 1: with the heading known there is exactly one mode; supplying the headings
@@ -473,8 +476,8 @@ fn square_k1_known_heading_equivalents() {
         let a = rotate(truth.translation(), phi);
         let eq = Pose2::new(a.x, a.y, truth.theta + phi);
         assert_eq!(Some(c), l.grid().cell_of_pose(&eq), "k = {k}");
-        assert!(l.coarse_success(&truth, 4));
-        assert_eq!(l.coarse_success(&truth, 1), k == 0);
+        assert!(l.coarse_success_within(&truth, 4, 1));
+        assert_eq!(l.coarse_success_within(&truth, 1, 1), k == 0);
         *pk = l.weights()[l.grid().index(c)];
         let m = l.top_modes::<2>(2);
         assert!(m[1].mass < 0.7 * m[0].mass, "single mode expected: {m:?}");
@@ -499,10 +502,10 @@ fn rectangle_keeps_two_modes() {
         assert_eq!(
             m[..2]
                 .iter()
-                .filter(|x| l.grid().coarse_success(x.cell, &t, 1))
+                .filter(|x| l.grid().coarse_success_within(x.cell, &t, 1, 1))
                 .count(),
             1
         );
     }
-    assert!(l.coarse_success(&truth, 2));
+    assert!(l.coarse_success_within(&truth, 2, 1));
 }
