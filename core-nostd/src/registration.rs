@@ -754,13 +754,13 @@ pub fn register(
     register_centred(plan, obs, initial, initial, params)
 }
 
-/// Annealed registration started from `starts` headings spread evenly over
-/// `initial.theta ± heading_span`, keeping the result with the lowest score. With the heading
-/// unknown, the coarse localizer's heading can be off by more than a rotation bin (36° for
-/// K = 10), which local perturbations rarely bridge with a handful of measurements; a
-/// deterministic sweep does. The trust region stays centred on `initial`. `starts ≤ 1`, a
-/// fixed heading or a non-positive span is plain [`register`]. Every start uses the same
-/// seed, so the result is a pure function of the inputs.
+/// Annealed registration after a heading sweep: sparse ICP from `starts` headings spread
+/// evenly over `initial.theta ± heading_span`, then Algorithm 3 from the one with the lowest
+/// score. With the heading unknown, the coarse localizer's heading can be off by more than a
+/// rotation bin (36° for K = 10), which local perturbations rarely bridge with a handful of
+/// measurements; a deterministic sweep does, and running the annealing once keeps the cost
+/// near that of [`register`] (it matters on the MCU). The trust region stays centred on
+/// `initial`. `starts ≤ 1`, a fixed heading or a non-positive span is plain [`register`].
 pub fn register_multistart(
     plan: &FloorPlan,
     obs: &Observations,
@@ -773,16 +773,27 @@ pub fn register_multistart(
     {
         return register(plan, obs, initial, params);
     }
-    let mut best: Option<Registration> = None;
+    check_inputs(obs, initial, &params.icp)?;
+    // Cheap sweep: plain sparse ICP from every start heading; the annealing (the expensive
+    // part) then runs once, from the best of them.
+    let mut pairs = Pairs::new();
+    let mut best: Option<(Pose2, f32)> = None;
     for k in 0..starts {
         let offset = -heading_span + 2.0 * heading_span * (k as f32 + 0.5) / starts as f32;
         let start = Pose2::new(initial.x, initial.y, initial.theta + offset);
-        let r = register_centred(plan, obs, &start, initial, params)?;
-        if best.as_ref().is_none_or(|b| r.score < b.score) {
-            best = Some(r);
+        let r = icp_inner(plan, obs, &start, initial, &params.icp, &mut pairs);
+        let pose = if in_trust_region(&r.pose, initial, &params.icp) {
+            r.pose
+        } else {
+            start
+        };
+        let score = match_pairs(plan, obs, &pose, &params.icp, &mut pairs).score;
+        if best.is_none_or(|(_, s)| score < s) {
+            best = Some((pose, score));
         }
     }
-    best.ok_or(RegistrationError::TooFewObservations)
+    let start = best.map(|(p, _)| p).unwrap_or(*initial);
+    register_centred(plan, obs, &start, initial, params)
 }
 
 /// [`register`] from `initial`, with the trust region centred on `centre`.

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 #[test]
 fn loopback_episodes_are_bit_identical_to_in_process_runs() {
-    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(5)).unwrap();
+    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
     l.client.hello().unwrap();
     assert!(check_episodes(&mut l.client, 10, 1) > 0);
     assert!(check_episodes(&mut l.client, 10, 10) > 0);
@@ -19,7 +19,7 @@ fn loopback_episodes_are_bit_identical_to_in_process_runs() {
 
 #[test]
 fn loopback_fault_suite() {
-    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(5)).unwrap();
+    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
     fault_suite(&mut l.client);
     check_episodes(&mut l.client, 2, 10);
     l.close().unwrap();
@@ -34,7 +34,7 @@ fn device_survives_hosts_that_disappear() {
         ..HOST_DEVICE
     }));
     // Host 1 starts an episode and drops the link.
-    let (host, mut dev) = Pipe::pair(Duration::from_secs(5));
+    let (host, mut dev) = Pipe::pair(Duration::from_secs(30));
     let t = std::thread::spawn(move || {
         let mut c = Client::new(host);
         c.hello().unwrap();
@@ -48,7 +48,7 @@ fn device_survives_hosts_that_disappear() {
     assert_eq!(session.phase(), Phase::Episode);
 
     // Host 2 starts an episode and goes silent without closing: the timeout abandons it.
-    let (host, mut dev) = Pipe::pair(Duration::from_secs(5));
+    let (host, mut dev) = Pipe::pair(Duration::from_secs(30));
     let t = std::thread::spawn(move || {
         let mut c = Client::new(host);
         c.hello().unwrap();
@@ -64,7 +64,7 @@ fn device_survives_hosts_that_disappear() {
     assert_eq!(session.stats().timeouts, 1);
 
     // Host 3 is served normally.
-    let (host, mut dev) = Pipe::pair(Duration::from_secs(5));
+    let (host, mut dev) = Pipe::pair(Duration::from_secs(30));
     let t = std::thread::spawn(move || {
         let mut c = Client::new(host);
         c.hello().unwrap();
