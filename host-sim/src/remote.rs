@@ -3,11 +3,10 @@
 //! session in a thread) while the host plays the instrument's sensors with the simulated
 //! world.
 //!
-//! Until the GHT localizer and the sparse registration are built into the device, every
-//! episode runs to its action limit and the device reports counts, cost and the trace
-//! fingerprint; `--verify` additionally replays each episode in-process
-//! ([`activesense_core::instrument::run_local`]) and fails unless actions, observations and
-//! report are bit-identical.
+//! The device localizes (GHT), decides when to stop and registers (sparse ICP); it reports
+//! counts, cost, the trace fingerprint, and its coarse and refined AgentPoses. `--verify`
+//! additionally replays each episode in-process ([`activesense_core::instrument::run_local`])
+//! and fails unless actions, observations and report are bit-identical.
 
 use crate::device::{sim_episode, SimInstrument};
 use crate::episode::{parse_agent, parse_termination, EpisodeSpec};
@@ -164,15 +163,26 @@ struct Totals {
 
 fn print_run(label: &str, run: &EpisodeRun, t: &mut Totals) {
     let r = &run.report;
+    let pose = |p: Option<activesense_core::Pose2>| {
+        p.map(|p| format!("({:.3}, {:.3}, {:.1}°)", p.x, p.y, p.theta.to_degrees()))
+            .unwrap_or_else(|| "none".into())
+    };
     println!(
         "{label}: {:?} after {} actions ({} measurements, {} no-return, {} rotations), cost {:.3}, \
-         trace {:08x}, cycles/update mean {} max {}",
+         coarse {}, refined {}{}, trace {:08x}, cycles/update mean {} max {}",
         r.end,
         r.actions,
         r.measurements,
         r.no_returns,
         r.rotations,
         r.cost,
+        pose(r.coarse),
+        pose(r.refined),
+        match r.recognised {
+            Some(true) => " (recognised)",
+            Some(false) => " (not recognised)",
+            None => "",
+        },
         r.trace_hash,
         r.cycles.total_cycles / r.cycles.updates.max(1) as u64,
         r.cycles.max_cycles
@@ -194,10 +204,6 @@ fn print_totals(t: &Totals, secs: f64) {
         t.measurements as f64 / n,
         t.no_returns as f64 / n,
         t.cost / n
-    );
-    println!(
-        "pending on the device: GHT localization (episodes end at the action limit, no coarse \
-         pose) and sparse registration (no refined pose)"
     );
 }
 
