@@ -14,7 +14,10 @@
 //! * **Algorithm 2**: `a` votes into the `(2·spread+1)²` neighbourhood of its cell (interior
 //!   cells only). For a neighbour centre `c` with offset `δ = c − a`, split into the
 //!   component along the ray `δ_∥ = δ·u` and across it `δ_⊥ = u × δ`:
-//!   `w = exp(−δ_∥²/2σ_∥² − δ_⊥²/2σ_⊥²)`, with
+//!   `w = max(0, 1 − q/4.5)`, `q = δ_∥²/2σ_∥² + δ_⊥²/2σ_⊥²` (a truncated quadratic: one
+//!   minus a ninth of the squared Mahalanobis distance, zero beyond 3σ; summing it over
+//!   measurements maximises a robust, truncated least-squares fit, and it needs no `exp`:
+//!   update 516 → 216 µs on the host at equal recognition), with
 //!   - measurement-model term `σ_∥² = σ_r² + σ_g²` (sensor range noise + grid quantisation,
 //!     `σ_g` = half the larger cell side);
 //!   - spatial-proximity term `σ_g²` in both directions;
@@ -22,11 +25,15 @@
 //!     over the spacing `Δ = 2π/(K·S)` of the rotation hypotheses moves the vote across the
 //!     ray by up to `r·Δ/2`, so the kernel widens across the ray in proportion to the range.
 //!
-//! Within one measurement the votes of a layer are combined by **maximum** in a one-layer
-//! scratch buffer (the measurement's evidence for a cell is its best explanation, so a cell
-//! crossed by several perimeter points or sub-hypotheses is not counted several times); the
-//! scratch layer is then **added** to the committed accumulator. Voting only ever adds, so
-//! an outlier cannot zero the belief (paper: "non-destructive").
+//! Within one measurement the votes of one heading hypothesis (slot) are combined by
+//! **maximum** in a one-layer scratch buffer (the measurement's evidence for a cell is its
+//! best explanation, so a cell crossed by several perimeter points is not counted several
+//! times); the scratch layer is then **added** to that slot's accumulator. A cell's weight is
+//! its best slot: one heading must explain every measurement. (Max-combining the sub-bins
+//! of a bin per measurement, as first done, let a wrong cell collect each measurement from
+//! a different heading; tracking them separately raised recognition after 12 measurements
+//! at 30 % outliers from 0.37 to 0.60 on 40 test plans, classical 0.475.) Voting only ever
+//! adds, so an outlier cannot zero the belief (paper: "non-destructive").
 //!
 //! The staging area ([`GhtLocalizer::stage`]) runs the same vote into the scratch layer and
 //! folds it into an entropy sum without writing the accumulator.
@@ -39,7 +46,10 @@ use serde::{Deserialize, Serialize};
 
 use super::grid::{self, CellIndex, GridSpec, Mode};
 use super::rtable::RTable;
-use super::{Confidence, LocError, LocalizerConfig, MAX_CELLS, MAX_LAYER_CELLS, MAX_RTABLE_POINTS};
+use super::{
+    Confidence, LocError, LocalizerConfig, MAX_CELLS, MAX_LAYER_CELLS, MAX_RTABLE_POINTS,
+    MAX_SUB_BINS,
+};
 
 /// What one vote (committed or staged) did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -59,7 +69,28 @@ pub struct Staged {
     pub stats: VoteStats,
 }
 
+/// Heading hypotheses tracked separately per rotation bin (accumulator slots). With
+/// `sub_bins ≤ TRACKED_SUB_BINS` every sub-bin has its own slot; with more, sub-bin `s` of
+/// `S` shares slot `s·T/S` (max-combined within a measurement).
+pub const TRACKED_SUB_BINS: usize = 4;
+/// Vote quantum: a measurement adds `round(w·VOTE_QUANTA)` (`w ∈ [0, 1]`) to a slot.
+pub const VOTE_QUANTA: u8 = 16;
+/// Rebase step: when a slot would overflow, every slot drops by this many quanta and the
+/// common offset grows by it (cells that far below the peak have relative probability
+/// `≤ e^{−λ·REBASE/Q}`, `e^{−18}` at the default λ).
+const REBASE: u8 = 128;
+/// Exponent table length: differences to the reference of `0..=255 + Q` quanta.
+const QTAB_LEN: usize = 256 + VOTE_QUANTA as usize;
+
+const _: () = assert!(MAX_SUB_BINS >= TRACKED_SUB_BINS);
+
 /// The GHT localizer. One fixed-size value (≤ 48 KiB at capacity), no allocation.
+///
+/// The accumulator keeps one `u8` evidence count per cell, rotation bin and tracked heading
+/// hypothesis (slot), in quanta of `1/VOTE_QUANTA` measurement plus a common offset. A
+/// cell's weight is the best slot of its bin: a heading hypothesis must explain *all*
+/// measurements (paper §3.2's `LUT(d, ξ)` per rotated model), which the earlier one-float-
+/// per-bin accumulator (max over sub-bins per measurement) did not enforce.
 #[derive(Clone, Debug)]
 pub struct GhtLocalizer {
     cfg: LocalizerConfig,
@@ -67,11 +98,20 @@ pub struct GhtLocalizer {
     rtable: RTable,
     interior: [bool; MAX_LAYER_CELLS],
     n_interior: u16,
-    belief: [f32; MAX_CELLS],
+    /// `[(bin · TRACKED_SUB_BINS + slot) · layer + cell]`, quanta above `base`.
+    acc: [u8; MAX_CELLS * TRACKED_SUB_BINS],
+    /// Common offset of `acc` (quanta).
+    base: u32,
+    /// Largest value in `acc`.
+    amax: u8,
+    /// `exp(−λ·k/Q)`, `k = 0..QTAB_LEN`.
+    qtab: [f32; QTAB_LEN],
     total: f32,
-    vmax: f32,
     z: f32,
-    scratch: [f32; MAX_LAYER_CELLS],
+    /// One slot-layer of quantised votes of the current measurement.
+    scratch: [u8; MAX_LAYER_CELLS],
+    /// Staging: per cell of one bin, the best slot after the hypothetical vote.
+    staged: [u16; MAX_LAYER_CELLS],
     updates: u32,
     ready: bool,
 }
@@ -86,11 +126,14 @@ impl GhtLocalizer {
             rtable: RTable::new_empty(),
             interior: [false; MAX_LAYER_CELLS],
             n_interior: 0,
-            belief: [0.0; MAX_CELLS],
+            acc: [0; MAX_CELLS * TRACKED_SUB_BINS],
+            base: 0,
+            amax: 0,
+            qtab: [1.0; QTAB_LEN],
             total: 0.0,
-            vmax: 0.0,
             z: 0.0,
-            scratch: [0.0; MAX_LAYER_CELLS],
+            scratch: [0; MAX_LAYER_CELLS],
+            staged: [0; MAX_LAYER_CELLS],
             updates: 0,
             ready: false,
         }
@@ -128,6 +171,9 @@ impl GhtLocalizer {
             }
         }
         self.n_interior = n;
+        for (k, q) in self.qtab.iter_mut().enumerate() {
+            *q = exp(-cfg.evidence_gain * k as f32 / VOTE_QUANTA as f32);
+        }
         self.cfg = *cfg;
         self.grid = grid;
         self.clear();
@@ -137,10 +183,11 @@ impl GhtLocalizer {
 
     /// Forgets all votes (new episode on the same plan); keeps grid and R-table.
     pub fn clear(&mut self) {
-        self.belief.fill(0.0);
-        self.scratch.fill(0.0);
+        self.acc.fill(0);
+        self.scratch.fill(0);
+        self.base = 0;
+        self.amax = 0;
         self.total = 0.0;
-        self.vmax = 0.0;
         self.updates = 0;
         self.z = self.normaliser();
     }
@@ -189,9 +236,35 @@ impl GhtLocalizer {
         self.updates
     }
 
-    /// The raw (unnormalised) accumulator in the grid layout, `grid().len()` long.
-    pub fn weights(&self) -> &[f32] {
-        &self.belief[..self.grid.len()]
+    /// Slots in use per rotation bin.
+    #[inline]
+    fn slots(&self) -> usize {
+        (self.cfg.effective_sub_bins() as usize).min(TRACKED_SUB_BINS)
+    }
+
+    /// Best slot of flat cell `i` (quanta above `base`).
+    #[inline]
+    fn level(&self, i: usize) -> u8 {
+        let l = self.grid.layer_len();
+        let (bin, cell) = (i / l, i % l);
+        let mut m = 0u8;
+        for s in 0..self.slots() {
+            m = m.max(self.acc[(bin * TRACKED_SUB_BINS + s) * l + cell]);
+        }
+        m
+    }
+
+    /// The accumulated evidence of flat cell `i` (`i < grid().len()`), in measurements: the
+    /// best heading hypothesis of the cell's bin. Voting only ever raises it.
+    #[inline]
+    pub fn weight(&self, i: usize) -> f32 {
+        (self.level(i) as u32 + self.base) as f32 / VOTE_QUANTA as f32
+    }
+
+    /// The accumulator in the grid layout ([`GhtLocalizer::weight`] of every cell,
+    /// `grid().len()` values).
+    pub fn weights(&self) -> impl ExactSizeIterator<Item = f32> + '_ {
+        (0..self.grid.len()).map(|i| self.weight(i))
     }
 
     /// Sum of the accumulator.
@@ -209,32 +282,56 @@ impl GhtLocalizer {
         Ok(())
     }
 
+    /// Sub-bins `lo..hi` that vote into slot `s`.
+    #[inline]
+    fn slot_subs(&self, s: usize) -> (u8, u8) {
+        let sub = self.cfg.effective_sub_bins() as usize;
+        let t = self.slots();
+        // Sub-bin k belongs to slot k·t/sub.
+        let lo = (s * sub).div_ceil(t);
+        let hi = ((s + 1) * sub).div_ceil(t);
+        (lo as u8, hi as u8)
+    }
+
     /// Commits one measurement (encoder bearing `β` rad, range `r` m). A no-return must not
     /// be passed (it carries no range).
     pub fn update(&mut self, bearing: f32, range: f32) -> Result<VoteStats, LocError> {
         self.check(bearing, range)?;
         let l = self.grid.layer_len();
+        let slots = self.slots();
+        let used = self.grid.rot_bins as usize * TRACKED_SUB_BINS * l;
+        if self.amax > u8::MAX - VOTE_QUANTA {
+            for a in self.acc[..used].iter_mut() {
+                *a = a.saturating_sub(REBASE);
+            }
+            self.amax -= REBASE;
+            self.base += REBASE as u32;
+        }
         let mut stats = VoteStats::default();
-        for j in 0..self.grid.rot_bins {
-            stats.votes += vote_layer(
-                &self.grid,
-                &self.cfg,
-                &self.rtable,
-                &self.interior,
-                &mut self.scratch[..l],
-                j,
-                bearing,
-                range,
-            );
-            let layer = &mut self.belief[j as usize * l..(j as usize + 1) * l];
-            for (b, &s) in layer.iter_mut().zip(self.scratch[..l].iter()) {
-                *b += s;
-                stats.mass += s;
-                if *b > self.vmax {
-                    self.vmax = *b;
+        let mut added = 0u32;
+        for j in 0..self.grid.rot_bins as usize {
+            for s in 0..slots {
+                let subs = self.slot_subs(s);
+                stats.votes += vote_layer(
+                    &self.grid,
+                    &self.cfg,
+                    &self.rtable,
+                    &self.interior,
+                    &mut self.scratch[..l],
+                    j as u8,
+                    subs,
+                    bearing,
+                    range,
+                );
+                let o = (j * TRACKED_SUB_BINS + s) * l;
+                for (a, &v) in self.acc[o..o + l].iter_mut().zip(&self.scratch[..l]) {
+                    *a += v;
+                    added += v as u32;
+                    self.amax = self.amax.max(*a);
                 }
             }
         }
+        stats.mass = added as f32 / VOTE_QUANTA as f32;
         self.total += stats.mass;
         self.updates += 1;
         self.z = self.normaliser();
@@ -243,32 +340,48 @@ impl GhtLocalizer {
 
     /// Evaluates a hypothetical measurement without committing it: the entropy the belief
     /// would have after [`GhtLocalizer::update`] with the same arguments. Only the scratch
-    /// layer is written; the committed belief is untouched.
+    /// layers are written; the committed belief is untouched.
     pub fn stage(&mut self, bearing: f32, range: f32) -> Result<Staged, LocError> {
         self.check(bearing, range)?;
         let l = self.grid.layer_len();
+        let slots = self.slots();
         let mut stats = VoteStats::default();
-        // Each measurement adds at most 1 to a cell, so vmax + 1 bounds every staged value.
-        let mut acc = EntropyAcc::new(self.cfg.evidence_gain, self.vmax + 1.0);
-        for j in 0..self.grid.rot_bins {
-            stats.votes += vote_layer(
-                &self.grid,
-                &self.cfg,
-                &self.rtable,
-                &self.interior,
-                &mut self.scratch[..l],
-                j,
-                bearing,
-                range,
-            );
-            let layer = &self.belief[j as usize * l..(j as usize + 1) * l];
-            for ((&b, &s), &inside) in layer.iter().zip(&self.scratch[..l]).zip(&self.interior) {
-                if inside {
-                    acc.add(b + s);
+        let mut added = 0u32;
+        // Each measurement adds at most Q to a slot, so amax + Q bounds every staged level.
+        let reference = self.amax as u16 + VOTE_QUANTA as u16;
+        let mut acc = EntropyAcc::new(self.cfg.evidence_gain);
+        for j in 0..self.grid.rot_bins as usize {
+            self.staged[..l].fill(0);
+            for s in 0..slots {
+                let subs = self.slot_subs(s);
+                stats.votes += vote_layer(
+                    &self.grid,
+                    &self.cfg,
+                    &self.rtable,
+                    &self.interior,
+                    &mut self.scratch[..l],
+                    j as u8,
+                    subs,
+                    bearing,
+                    range,
+                );
+                let o = (j * TRACKED_SUB_BINS + s) * l;
+                for ((m, &a), &v) in self.staged[..l]
+                    .iter_mut()
+                    .zip(&self.acc[o..o + l])
+                    .zip(&self.scratch[..l])
+                {
+                    *m = (*m).max(a as u16 + v as u16);
+                    added += v as u32;
                 }
-                stats.mass += s;
+            }
+            for (&m, &inside) in self.staged[..l].iter().zip(&self.interior[..l]) {
+                if inside {
+                    acc.add(&self.qtab, reference - m, m as u32 + self.base);
+                }
             }
         }
+        stats.mass = added as f32 / VOTE_QUANTA as f32;
         Ok(Staged {
             entropy: acc.entropy(self.uniform_entropy()),
             stats,
@@ -291,11 +404,10 @@ impl GhtLocalizer {
         if l == 0 || !self.interior[i % l] {
             return 0.0;
         }
-        let v = self.belief[i];
         if self.cfg.evidence_gain > 0.0 {
-            exp(self.cfg.evidence_gain * (v - self.vmax))
+            self.qtab[(self.amax - self.level(i)) as usize]
         } else if self.total > 0.0 {
-            v
+            self.weight(i)
         } else {
             1.0
         }
@@ -318,11 +430,12 @@ impl GhtLocalizer {
     /// Shannon entropy (nats) of the normalised belief. Before any vote the belief is
     /// uniform over the interior cells: `ln(interior cells × K)`.
     pub fn entropy(&self) -> f32 {
-        let mut acc = EntropyAcc::new(self.cfg.evidence_gain, self.vmax);
+        let mut acc = EntropyAcc::new(self.cfg.evidence_gain);
         let l = self.grid.layer_len();
-        for (i, &b) in self.weights().iter().enumerate() {
+        for i in 0..self.grid.len() {
             if self.interior[i % l] {
-                acc.add(b);
+                let m = self.level(i);
+                acc.add(&self.qtab, (self.amax - m) as u16, m as u32 + self.base);
             }
         }
         acc.entropy(self.uniform_entropy())
@@ -352,7 +465,16 @@ impl GhtLocalizer {
         if !self.ready || self.total <= 0.0 {
             return None;
         }
-        Some(self.grid.cell_at(grid::argmax(self.weights())))
+        let mut best = 0;
+        let mut bv = 0u8;
+        for i in 0..self.grid.len() {
+            let v = self.level(i);
+            if v > bv {
+                bv = v;
+                best = i;
+            }
+        }
+        Some(self.grid.cell_at(best))
     }
 
     /// The AgentPose of the most voted cell; `None` before any vote.
@@ -363,7 +485,13 @@ impl GhtLocalizer {
     /// Up to `N` modes, strongest first, separated by more than `min_separation` cells /
     /// bins (see [`grid::top_modes`]).
     pub fn top_modes<const N: usize>(&self, min_separation: u8) -> HVec<Mode, N> {
-        grid::top_modes(&self.grid, self.weights(), min_separation, |i| self.prob(i))
+        grid::top_modes_by(
+            &self.grid,
+            self.grid.len(),
+            |i| self.weight(i),
+            min_separation,
+            |i| self.prob(i),
+        )
     }
 
     /// The coarse-success test of the argmax against a ground-truth AgentPose
@@ -405,34 +533,35 @@ impl Default for GhtLocalizer {
     }
 }
 
-/// Running `Z = Σq`, `S = Σ q ln q` over the interior cells in a fixed order, with
-/// `q = exp(λ(v − ref))` (or `q = v` when `λ = 0`); `H = ln Z − S/Z`. Committed and staged
+/// Running `Z = Σq`, `S = Σ q ln q` over the interior cells in a fixed order; `H = ln Z −
+/// S/Z`. With `λ > 0`, `q = exp(−λ·k/Q)` for a cell `k` quanta below the reference (table
+/// lookup, `ln q = −λk/Q`); with `λ = 0`, `q` = the cell's weight. Committed and staged
 /// entropy share it.
 struct EntropyAcc {
     gain: f32,
-    reference: f32,
     z: f32,
     s: f32,
 }
 
 impl EntropyAcc {
-    fn new(gain: f32, reference: f32) -> Self {
+    fn new(gain: f32) -> Self {
         EntropyAcc {
             gain,
-            reference,
             z: 0.0,
             s: 0.0,
         }
     }
 
+    /// A cell `below` quanta under the reference whose absolute level is `level` quanta.
     #[inline]
-    fn add(&mut self, v: f32) {
+    fn add(&mut self, qtab: &[f32; QTAB_LEN], below: u16, level: u32) {
         if self.gain > 0.0 {
-            let x = self.gain * (v - self.reference);
-            let q = exp(x);
+            let k = (below as usize).min(QTAB_LEN - 1);
+            let q = qtab[k];
             self.z += q;
-            self.s += q * x;
-        } else if v > 0.0 {
+            self.s += q * (-self.gain * k as f32 / VOTE_QUANTA as f32);
+        } else if level > 0 {
+            let v = level as f32 / VOTE_QUANTA as f32;
             self.z += v;
             self.s += v * ln(v);
         }
@@ -447,6 +576,9 @@ impl EntropyAcc {
     }
 }
 
+/// `1 / T`, `T = 4.5`: the vote `1 − q/T` with `q = d²/2` vanishes at `d = 3σ`.
+const INV_CUTOFF: f32 = 1.0 / 4.5;
+
 /// Algorithms 1 and 2 for one rotation bin: fills `scratch` (one layer) with the
 /// max-combined votes of measurement `(bearing, range)`; returns the number of votes.
 #[allow(clippy::too_many_arguments)]
@@ -455,12 +587,13 @@ fn vote_layer(
     cfg: &LocalizerConfig,
     rtable: &RTable,
     interior: &[bool; MAX_LAYER_CELLS],
-    scratch: &mut [f32],
+    scratch: &mut [u8],
     bin: u8,
+    subs: (u8, u8),
     bearing: f32,
     range: f32,
 ) -> u32 {
-    scratch.fill(0.0);
+    scratch.fill(0);
     let nx = grid.nx as i32;
     let ny = grid.ny as i32;
     let (cw, ch) = (grid.cell[0], grid.cell[1]);
@@ -479,7 +612,7 @@ fn vote_layer(
     let cos_min = cos(cfg.max_incidence);
     let spread = cfg.spread as i32;
     let mut votes = 0u32;
-    for s in 0..sub {
+    for s in subs.0..subs.1.min(sub) {
         let h = if grid.rot_bins > 1 {
             bin as f32 * grid.bin_width() - 0.5 * grid.bin_width() + (s as f32 + 0.5) * delta
         } else {
@@ -517,9 +650,13 @@ fn vote_layer(
                     let dx = x0 + (jx as f32 + 0.5) * cw - ax;
                     let par = dx * ux + dy * uy;
                     let perp = ux * dy - uy * dx;
-                    let w = exp(-(par * par * k_par + perp * perp * k_perp));
-                    if w > scratch[idx] {
-                        scratch[idx] = w;
+                    // Truncated quadratic: 1 − d²/9 (d = Mahalanobis distance), 0 beyond 3σ.
+                    let w = 1.0 - (par * par * k_par + perp * perp * k_perp) * INV_CUTOFF;
+                    if w > 0.0 {
+                        let wq = (w * VOTE_QUANTA as f32 + 0.5) as u8;
+                        if wq > scratch[idx] {
+                            scratch[idx] = wq;
+                        }
                     }
                 }
             }

@@ -323,10 +323,21 @@ pub fn top_modes<const N: usize, F: Fn(usize) -> f32>(
     min_separation: u8,
     prob: F,
 ) -> HVec<Mode, N> {
+    top_modes_by(grid, w.len(), |i| w[i], min_separation, prob)
+}
+
+/// [`top_modes`] with the score of flat cell `i < n` given by `score(i)` instead of a slice.
+pub fn top_modes_by<const N: usize, S: Fn(usize) -> f32, F: Fn(usize) -> f32>(
+    grid: &GridSpec,
+    n: usize,
+    score: S,
+    min_separation: u8,
+    prob: F,
+) -> HVec<Mode, N> {
     let mut out: HVec<Mode, N> = HVec::new();
     while !out.is_full() {
         let mut best: Option<(usize, f32)> = None;
-        for (i, &v) in w.iter().enumerate() {
+        for (i, v) in (0..n).map(|i| (i, score(i))) {
             if v <= 0.0 || best.is_some_and(|(_, bv)| v <= bv) {
                 continue;
             }

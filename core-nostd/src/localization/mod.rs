@@ -23,10 +23,12 @@
 //!   h + 2πk/n)` equivalent; [`GridSpec::coarse_success`] takes `symmetry_order: u8`.
 //!
 //! ## Memory (the MCU has 128 KiB of RAM)
-//! [`GhtLocalizer`] is one fixed-size value, `size_of::<GhtLocalizer>()` = 46 724 bytes
-//! (≤ 48 KiB) at capacity 30 × 30 × 10 with a 384-point R-table: belief 36 000 B (f32),
-//! one-layer scratch 3 600 B (shared by the commit and the staging path), R-table 6 144 B,
-//! interior mask 900 B. Build it with the `const fn` [`GhtLocalizer::new_empty`] (e.g. in a
+//! [`GhtLocalizer`] is one fixed-size value, `size_of::<GhtLocalizer>()` = 46 912 bytes
+//! (≤ 48 KiB) at capacity 30 × 30 × 10 with a 384-point R-table: accumulator 36 000 B
+//! (`u8` per cell, bin and tracked heading hypothesis, [`ght::TRACKED_SUB_BINS`] = 4, in
+//! quanta of 1/16 measurement above a common offset), vote scratch layer 900 B, staging layer
+//! 1 800 B, `exp` table 1 088 B, R-table 6 144 B, interior mask 900 B. Build it with the
+//! `const fn` [`GhtLocalizer::new_empty`] (e.g. in a
 //! `static`) and fill it with [`GhtLocalizer::reset`]; nothing is allocated.
 
 pub mod ght;
