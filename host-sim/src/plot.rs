@@ -104,12 +104,16 @@ pub fn budget_svg(report: &EvalReport) -> String {
         r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">Recognition and pose error within a measurement budget ({} plans)</text>"#,
         report.options.plans
     );
-    // Shared pose-error scale: the largest plotted mean, rounded up to a nice value.
-    let emax = report
+    // Shared pose-error scale: the 90th percentile of the plotted means, rounded up to a
+    // nice value, so one agent with a huge error does not flatten the others (lines above
+    // the scale are clipped at the top edge).
+    let mut all: Vec<f64> = report
         .results
         .iter()
         .flat_map(|r| r.pose_error_by_budget.iter().flatten().copied())
-        .fold(0.0f64, f64::max);
+        .collect();
+    all.sort_by(f64::total_cmp);
+    let emax = all.get(all.len() * 9 / 10).copied().unwrap_or(0.0);
     let emax = [0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0]
         .into_iter()
         .find(|v| *v >= emax)
