@@ -75,9 +75,19 @@ struct Running {
     no_returns: u16,
     last_scan: u32,
     trace: TraceHash,
-    cycles: UpdateStats,
+    cycles: EpisodeCycles,
     update_start: u32,
+    /// What the update being timed did (set by `observe`).
+    update_kind: UpdateKind,
     stop: bool,
+}
+
+/// What an observed action did to the device's state (for the cycle statistics).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum UpdateKind {
+    Vote,
+    Rotation,
+    NoReturn,
 }
 
 /// The device's decision maker for one plan and one episode at a time.
@@ -221,8 +231,9 @@ impl Controller {
             // The scan is not used by the baseline agents; the learnt policy will read it.
             last_scan: p.initial_scan,
             trace: TraceHash::new(),
-            cycles: UpdateStats::default(),
+            cycles: EpisodeCycles::default(),
             update_start: self.now(),
+            update_kind: UpdateKind::Rotation,
             stop: false,
         });
         Ok(())
@@ -247,8 +258,15 @@ impl Controller {
 
     /// The next action request, or the end of the episode (which clears it). Repeats the
     /// pending request until it is observed. Without a running episode: `None`.
+    ///
+    /// **Timing.** One update spans from the start of [`Controller::observe`] to the end
+    /// of the decision here (booking the observation, the GHT vote and termination check
+    /// for a returned range, choosing the next action); the end-of-episode chain
+    /// ([`Pipeline::finish`]: coarse read-out, registration, recognition) is timed
+    /// separately into [`EpisodeCycles::finish`].
     pub fn next_step(&mut self) -> Option<Step> {
-        let now = self.now();
+        let clock = self.clock;
+        let now = || clock.map(|c| c()).unwrap_or(0);
         let r = self.running.as_mut()?;
         if let Some(action) = r.pending {
             return Some(Step::Act {
@@ -266,9 +284,13 @@ impl Controller {
                 action,
             })
         };
-        let cycles = now.wrapping_sub(r.update_start);
+        let cycles = now().wrapping_sub(r.update_start);
         if r.state.actions > 0 {
-            r.cycles.record(cycles);
+            match r.update_kind {
+                UpdateKind::Vote => r.cycles.vote.record(cycles),
+                UpdateKind::Rotation => r.cycles.rotation.record(cycles),
+                UpdateKind::NoReturn => r.cycles.no_return.record(cycles),
+            }
             self.cycles.record(cycles);
         }
         match step {
@@ -282,7 +304,9 @@ impl Controller {
                 let mut rep = Self::report(r, end);
                 self.running = None;
                 if let Some(plan) = self.plan.as_ref() {
+                    let t0 = now();
                     let result = self.pipeline.finish(plan);
+                    rep.cycles.finish = now().wrapping_sub(t0);
                     rep.coarse = result.coarse;
                     rep.refined = result.refined.map(|x| x.pose);
                     rep.recognised = result.recognised;
@@ -324,6 +348,11 @@ impl Controller {
         r.state.apply(action);
         r.trace.push(action, obs);
         r.last_scan = obs.scan;
+        r.update_kind = match (action, obs.range) {
+            (Action::Measure, Some(_)) => UpdateKind::Vote,
+            (Action::Measure, None) => UpdateKind::NoReturn,
+            _ => UpdateKind::Rotation,
+        };
         if action == Action::Measure {
             match obs.range {
                 Some(range) => {
@@ -856,6 +885,48 @@ mod tests {
         assert_eq!(s.controller().measurements().len(), 2);
     }
 
+    static TICKS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+    /// A clock that advances by 7 per reading.
+    fn tick7() -> u32 {
+        TICKS.fetch_add(7, core::sync::atomic::Ordering::Relaxed)
+    }
+
+    #[test]
+    fn cycle_statistics_split_by_update_kind() {
+        let mut ctl = Controller::new(Some(tick7));
+        let plan = FloorPlan::from_raw(HVec::from_slice(&square()).unwrap()).unwrap();
+        ctl.load_plan(plan);
+        ctl.start(&params(40)).unwrap();
+        let mut k = 0;
+        let rep = loop {
+            match ctl.next_step().unwrap() {
+                Step::Act { step, action } => {
+                    // Every other measurement gets no return.
+                    let range = (action == Action::Measure).then_some(1.25);
+                    let range = if range.is_some() {
+                        k += 1;
+                        range.filter(|_| k % 2 == 1)
+                    } else {
+                        None
+                    };
+                    ctl.observe(step, &Observation { range, scan: 0 }).unwrap();
+                }
+                Step::Done(rep) => break rep,
+            }
+        };
+        let c = rep.cycles;
+        assert!(rep.no_returns > 0 && rep.measurements > rep.no_returns);
+        assert_eq!(c.vote.updates, (rep.measurements - rep.no_returns) as u32);
+        assert_eq!(c.no_return.updates, rep.no_returns as u32);
+        assert_eq!(c.rotation.updates, rep.rotations as u32);
+        assert_eq!(c.updates().updates, rep.actions as u32);
+        // Each update reads the clock twice (observe start, decision end): 7 ticks apart.
+        assert_eq!(c.vote.max_cycles, 7);
+        assert_eq!(c.updates().total_cycles, 7 * rep.actions as u64);
+        assert_eq!(c.finish, 7);
+        assert_eq!(ctl.cycles(), c.updates());
+    }
+
     #[test]
     fn bad_inputs_get_typed_errors() {
         let mut s = Session::new(CFG);
@@ -996,6 +1067,11 @@ mod tests {
     #[test]
     fn largest_replies_fit() {
         let s = Session::new(CFG);
+        let max_stats = UpdateStats {
+            updates: u32::MAX,
+            total_cycles: u64::MAX,
+            max_cycles: u32::MAX,
+        };
         let rep = EpisodeReport {
             end: EpisodeEnd::Aborted,
             actions: u16::MAX,
@@ -1008,10 +1084,11 @@ mod tests {
             coarse: Some(Pose2::new(1.0, 2.0, 3.0)),
             refined: Some(Pose2::new(1.0, 2.0, 3.0)),
             recognised: Some(true),
-            cycles: UpdateStats {
-                updates: u32::MAX,
-                total_cycles: u64::MAX,
-                max_cycles: u32::MAX,
+            cycles: EpisodeCycles {
+                vote: max_stats,
+                rotation: max_stats,
+                no_return: max_stats,
+                finish: u32::MAX,
             },
         };
         let mut info = s.device_info();
@@ -1030,7 +1107,7 @@ mod tests {
                 timeouts: u32::MAX,
                 episodes: u32::MAX,
             },
-            cycles: rep.cycles,
+            cycles: max_stats,
         };
         for r in [
             Response::Done(rep),

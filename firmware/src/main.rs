@@ -7,6 +7,11 @@
 //! **Modes** (semihosting command line, i.e. QEMU `-semihosting-config ...,arg=smoke` or
 //! `-append smoke`):
 //! * `smoke`: exit with status 0 right after the boot line (`cargo xtask qemu-smoke`).
+//! * `bench`: serve the protocol as by default, but with the SysTick interrupt enabled
+//!   only while the core sleeps waiting for the host, so no tick handler runs inside a
+//!   timed update (`cargo xtask mcu-bench`). The millisecond clock then counts idle time
+//!   only. (The tick must stay on while idle: QEMU with `-icount` and no timer armed can
+//!   miss the USART wake-up.)
 //! * default: serve the serial protocol (`docs/protocol.md`,
 //!   [`activesense_core::session`]) on USART1 (QEMU `serial0`) until the host sends
 //!   `Shutdown`; then print `activesense-firmware: shutdown` and exit with status 0.
@@ -18,8 +23,15 @@
 //! **Clocks.** SysTick runs from the core clock, assumed to be 168 MHz (QEMU's
 //! netduinoplus2 models SYSCLK at 168 MHz; real hardware needs the PLL set up first,
 //! which this firmware does not do yet). It provides the millisecond clock for the host
-//! silence timeout and the cycle counter for the per-update statistics (under QEMU these
-//! are virtual-time cycles, not real M4F cycles).
+//! silence timeout.
+//!
+//! The cycle counter of the per-update statistics is the free-running 32-bit TIM2
+//! counter (prescaler 1). On hardware after reset (HSI 16 MHz, APB1 undivided) TIM2
+//! counts core clock cycles. QEMU models the STM32 timers at 1 GHz of *virtual* time, so
+//! under `-icount shift=0` (every guest instruction advances virtual time by exactly
+//! 2^0 ns) one TIM2 tick is exactly one executed guest instruction: `cargo xtask
+//! mcu-bench` reports these as instructions. Without `-icount` the ticks are host-paced
+//! virtual nanoseconds and mean little.
 #![no_std]
 #![no_main]
 
@@ -51,20 +63,26 @@ fn millis() -> u32 {
     MILLIS.load(Ordering::Relaxed)
 }
 
-/// Core-clock cycles since boot (mod 2^32), from the SysTick count.
-fn cycles() -> u32 {
-    loop {
-        let ms = millis();
-        // SYST_CVR counts down from TICK_RELOAD.
-        // SAFETY: read-only access to the SysTick current-value register.
-        let val = unsafe { (*cortex_m::peripheral::SYST::PTR).cvr.read() } & 0x00FF_FFFF;
-        // A tick between the two reads would pair a new count with an old millisecond.
-        if millis() == ms {
-            return ms
-                .wrapping_mul(TICK_RELOAD + 1)
-                .wrapping_add(TICK_RELOAD.saturating_sub(val));
-        }
+const RCC_APB1ENR: usize = 0x4002_3840;
+const TIM2_CR1: usize = 0x4000_0000;
+const TIM2_CNT: usize = 0x4000_0024;
+
+/// Starts TIM2 as a free-running up-counter (reset values: prescaler 1, ARR 0xFFFF_FFFF).
+fn start_cycle_counter() {
+    // SAFETY: fixed, aligned STM32F405 registers; RCC_APB1ENR bit 0 = TIM2EN,
+    // TIM2_CR1 bit 0 = CEN. Nothing else uses TIM2.
+    unsafe {
+        let en = core::ptr::read_volatile(RCC_APB1ENR as *const u32);
+        core::ptr::write_volatile(RCC_APB1ENR as *mut u32, en | 1);
+        core::ptr::write_volatile(TIM2_CR1 as *mut u32, 1);
     }
+}
+
+/// TIM2 ticks since it started (mod 2^32): core cycles on hardware, executed instructions
+/// under QEMU `-icount shift=0` (see the crate docs).
+fn cycles() -> u32 {
+    // SAFETY: read-only access to the TIM2 counter register.
+    unsafe { core::ptr::read_volatile(TIM2_CNT as *const u32) }
 }
 
 /// USART1's interrupt (IRQ 37) only wakes the core from `wfi`. The line stays high until
@@ -118,7 +136,7 @@ fn cmdline_has(word: &[u8]) -> bool {
 
 #[entry]
 fn main() -> ! {
-    let mut cp = cortex_m::Peripherals::take().unwrap();
+    let cp = cortex_m::Peripherals::take().unwrap();
     let range_mm = match self_test() {
         Ok(r) => r,
         Err(msg) => {
@@ -136,12 +154,17 @@ fn main() -> ! {
     if cmdline_has(b"smoke") {
         debug::exit(debug::EXIT_SUCCESS);
     }
+    let bench = cmdline_has(b"bench");
 
-    cp.SYST.set_clock_source(SystClkSource::Core);
-    cp.SYST.set_reload(TICK_RELOAD);
-    cp.SYST.clear_current();
-    cp.SYST.enable_interrupt();
-    cp.SYST.enable_counter();
+    start_cycle_counter();
+    let mut syst = cp.SYST;
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(TICK_RELOAD);
+    syst.clear_current();
+    if !bench {
+        syst.enable_interrupt();
+    }
+    syst.enable_counter();
 
     let mut uart = usart::Usart1::init(115_200, CORE_HZ / 2);
     usart::enable_rx_interrupt();
@@ -172,8 +195,15 @@ fn main() -> ! {
             cortex_m::peripheral::NVIC::unpend(usart::Usart1Irq);
             // SAFETY: as at start-up; DefaultHandler only masks the line again.
             unsafe { cortex_m::peripheral::NVIC::unmask(usart::Usart1Irq) };
+            if bench {
+                syst.enable_interrupt();
+            }
             if !uart.read_ready().unwrap_or(false) {
                 cortex_m::asm::wfi();
+            }
+            if bench {
+                // A tick that pended meanwhile has already run (interrupts are enabled).
+                syst.disable_interrupt();
             }
         }
     }

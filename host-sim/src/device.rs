@@ -279,6 +279,16 @@ impl Qemu {
     /// Starts the emulator on `elf` and waits (up to 10 s) for it to connect USART1.
     /// Returns the emulator and the connected stream (read timeout `timeout`).
     pub fn start(elf: &Path, timeout: Duration) -> LinkResult<(Qemu, std::net::TcpStream)> {
+        Self::start_with_args(elf, timeout, &[])
+    }
+
+    /// As [`Qemu::start`], with `extra` appended to the emulator's command line (e.g.
+    /// `-icount shift=0` for instruction counting, `-append bench` for the firmware).
+    pub fn start_with_args(
+        elf: &Path,
+        timeout: Duration,
+        extra: &[String],
+    ) -> LinkResult<(Qemu, std::net::TcpStream)> {
         if !elf.is_file() {
             return Err(LinkError::Local(format!(
                 "firmware ELF not found at {} (build it with `cargo build -p activesense-firmware \
@@ -302,6 +312,7 @@ impl Qemu {
                 "-kernel",
             ])
             .arg(elf)
+            .args(extra)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())

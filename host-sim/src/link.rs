@@ -437,6 +437,16 @@ pub struct Link {
 
 /// Opens the transport named by `spec` with reply timeout `timeout`.
 pub fn open(spec: &LinkSpec, timeout: Duration) -> LinkResult<Link> {
+    open_with_qemu_args(spec, timeout, &[])
+}
+
+/// As [`open`]; a `qemu` link gets `qemu_args` appended to the emulator's command line
+/// (ignored by the other transports).
+pub fn open_with_qemu_args(
+    spec: &LinkSpec,
+    timeout: Duration,
+    qemu_args: &[String],
+) -> LinkResult<Link> {
     match spec {
         LinkSpec::Loopback => {
             let (host, device) = Pipe::pair(timeout);
@@ -470,7 +480,7 @@ pub fn open(spec: &LinkSpec, timeout: Duration) -> LinkResult<Link> {
             })
         }
         LinkSpec::Qemu(elf) => {
-            let (qemu, stream) = Qemu::start(elf, timeout)?;
+            let (qemu, stream) = Qemu::start_with_args(elf, timeout, qemu_args)?;
             Ok(Link {
                 client: Client::new(Box::new(stream)),
                 qemu: Some(qemu),

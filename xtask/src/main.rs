@@ -7,6 +7,7 @@
 //! cargo xtask setup        # only the installs: thumbv7em-none-eabihf target, qemu-system-arm
 //! cargo xtask firmware     # build the firmware ELF (profile `firmware`)
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
+//! cargo xtask mcu-bench [--episodes N]  # instructions per update / registration (QEMU -icount)
 //! ```
 
 mod fuzz;
@@ -32,6 +33,7 @@ fn main() {
         Some("qemu-smoke") => qemu_smoke(),
         Some("size") => build_firmware().and_then(|elf| size::report(&elf)),
         Some("fuzz") => fuzz::run(&args[1..]),
+        Some("mcu-bench") => mcu_bench(&args[1..]),
         Some("help") | Some("--help") | Some("-h") | None => {
             print_help();
             Ok(())
@@ -56,7 +58,10 @@ fn print_help() {
          firmware    build the firmware ELF and print its path\n  \
          qemu-smoke  boot the firmware under qemu-system-arm -M netduinoplus2 and check its boot line\n  \
          size        firmware flash / static RAM against the budgets (512 KiB / 96 KiB)\n  \
-         fuzz [SECS] run the cargo-fuzz target `session` for SECS seconds (default 60)"
+         fuzz [SECS] run the cargo-fuzz target `session` for SECS seconds (default 60)\n  \
+         mcu-bench [--episodes N]\n              \
+         instructions per GHT update, rotation and registration on the Cortex-M4 under\n              \
+         QEMU -icount shift=0, K = 1 and K = 10, N episodes each (default 20)"
     );
 }
 
@@ -202,6 +207,44 @@ fn qemu_smoke() -> Result<()> {
     }
     println!("qemu-smoke: ok ({:.1} s)", started.elapsed().as_secs_f32());
     Ok(())
+}
+
+/// `cargo xtask mcu-bench [--episodes N]`: builds the firmware and runs N simulated
+/// episodes per rotation-bin setting against it under `qemu-system-arm -icount shift=0`
+/// (`activesense mcu-bench`, which prints the markdown table). Deterministic: the same
+/// command gives the same numbers.
+fn mcu_bench(args: &[String]) -> Result<()> {
+    let mut episodes = 20u32;
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--episodes" => {
+                episodes = it
+                    .next()
+                    .context("--episodes needs a number")?
+                    .parse()
+                    .context("--episodes needs a number")?
+            }
+            other => bail!("mcu-bench: unknown argument '{other}'"),
+        }
+    }
+    setup()?;
+    let elf = build_firmware()?;
+    run(cargo()
+        .args([
+            "run",
+            "--quiet",
+            "-p",
+            "activesense-sim",
+            "--bin",
+            "activesense",
+            "--",
+            "mcu-bench",
+            "--episodes",
+            &episodes.to_string(),
+            "--elf",
+        ])
+        .arg(&elf))
 }
 
 /// The whole test suite: installs, formatting, the MCU build of the core, the firmware under
