@@ -407,8 +407,40 @@ pub enum ServeEnd {
     Eof,
 }
 
+/// Something a device log should record; queued by the [`Session`] and drained with
+/// [`Session::take_event`] (the oldest are dropped beyond [`MAX_EVENTS`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SessionEvent {
+    /// A `Hello` opened a session.
+    Opened,
+    /// A plan was loaded.
+    PlanLoaded {
+        /// Its vertex count.
+        vertices: u8,
+    },
+    /// An episode started.
+    EpisodeStarted {
+        /// Rotation bins K.
+        rot_bins: u8,
+        /// Action limit.
+        max_actions: u16,
+    },
+    /// An episode ended (`Done` or `Abort`).
+    EpisodeEnded(EpisodeReport),
+    /// A frame or request was answered with an error.
+    Rejected(WireError),
+    /// The host went silent; the running episode was abandoned.
+    TimedOut,
+    /// `Shutdown` was acknowledged.
+    Shutdown,
+}
+
+/// Capacity of the [`SessionEvent`] queue.
+pub const MAX_EVENTS: usize = 4;
+
 /// The device's protocol state machine.
 pub struct Session {
+    events: heapless::Deque<SessionEvent, MAX_EVENTS>,
     acc: FrameAccumulator,
     ctl: Controller,
     config: SessionConfig,
@@ -431,6 +463,7 @@ impl Session {
     /// A closed session (power-on state).
     pub const fn new(config: SessionConfig) -> Self {
         Session {
+            events: heapless::Deque::new(),
             acc: FrameAccumulator::new(),
             ctl: Controller::new(config.cycle_clock),
             config,
@@ -502,6 +535,18 @@ impl Session {
         }
     }
 
+    /// The oldest unread [`SessionEvent`].
+    pub fn take_event(&mut self) -> Option<SessionEvent> {
+        self.events.pop_front()
+    }
+
+    fn event(&mut self, e: SessionEvent) {
+        if self.events.is_full() {
+            self.events.pop_front();
+        }
+        let _ = self.events.push_back(e);
+    }
+
     /// Link counters.
     pub fn stats(&self) -> LinkStats {
         self.stats
@@ -521,6 +566,7 @@ impl Session {
         }
         self.acc.clear();
         if self.ctl.abort().is_some() {
+            self.event(SessionEvent::TimedOut);
             self.stats.timeouts = self.stats.timeouts.saturating_add(1);
             self.open = false;
             return true;
@@ -562,6 +608,7 @@ impl Session {
             };
             match decoded {
                 Err((e, id)) => {
+                    self.event(SessionEvent::Rejected(e.to_wire()));
                     self.stats.frames_bad = self.stats.frames_bad.saturating_add(1);
                     self.send(id, &Response::Error(e.to_wire()), out)?;
                 }
@@ -594,15 +641,18 @@ impl Session {
                         device: PROTOCOL_VERSION,
                     }
                 };
+                self.event(SessionEvent::Rejected(e));
                 self.send(id, &Response::Error(e), out)?;
                 return Ok(Control::Continue);
             }
             self.open = true;
+            self.event(SessionEvent::Opened);
             let info = self.device_info();
             self.send(id, &Response::Hello(info), out)?;
             return Ok(Control::Continue);
         }
         if !self.open {
+            self.event(SessionEvent::Rejected(WireError::NoSession));
             self.send(id, &Response::Error(WireError::NoSession), out)?;
             return Ok(Control::Continue);
         }
@@ -616,6 +666,9 @@ impl Session {
         let expected = next_id(self.last_id);
         if id != expected {
             self.stats.sequence_errors = self.stats.sequence_errors.saturating_add(1);
+            self.event(SessionEvent::Rejected(WireError::OutOfSequence {
+                expected,
+            }));
             self.send(
                 id,
                 &Response::Error(WireError::OutOfSequence { expected }),
@@ -625,7 +678,30 @@ impl Session {
         }
         self.last_id = id;
         self.reply_len = 0;
+        let started = match &req {
+            Request::StartEpisode(p) => Some(SessionEvent::EpisodeStarted {
+                rot_bins: p.rot_bins,
+                max_actions: p.max_actions,
+            }),
+            _ => None,
+        };
         let (resp, control) = self.handle(req);
+        match (&resp, started) {
+            (Response::Error(_), _) => {}
+            (_, Some(e)) => self.event(e),
+            _ => {}
+        }
+        match &resp {
+            Response::PlanLoaded(p) => self.event(SessionEvent::PlanLoaded {
+                vertices: p.vertices,
+            }),
+            Response::Done(r) | Response::Aborted(r) => self.event(SessionEvent::EpisodeEnded(*r)),
+            Response::Error(e) => self.event(SessionEvent::Rejected(*e)),
+            _ => {}
+        }
+        if control == Control::Shutdown {
+            self.event(SessionEvent::Shutdown);
+        }
         if let Response::Error(WireError::StepMismatch { .. }) = resp {
             self.stats.sequence_errors = self.stats.sequence_errors.saturating_add(1);
         }
@@ -883,6 +959,22 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert_eq!(s.controller().measurements().len(), 2);
+        // The event queue keeps the latest MAX_EVENTS: start, rejected step, end.
+        let events: Vec<_> = core::iter::from_fn(|| s.take_event()).collect();
+        assert!(matches!(
+            events.last(),
+            Some(SessionEvent::EpisodeEnded(r)) if r.actions == 12
+        ));
+        assert!(events.contains(&SessionEvent::EpisodeStarted {
+            rot_bins: 10,
+            max_actions: 12
+        }));
+        assert!(
+            events.contains(&SessionEvent::Rejected(WireError::StepMismatch {
+                expected: 2
+            }))
+        );
+        assert_eq!(s.take_event(), None);
     }
 
     static TICKS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);

@@ -17,6 +17,13 @@
 //!   `Shutdown`; then print `activesense-firmware: shutdown` and exit with status 0.
 //!   The firmware owns the decisions; in simulation the host answers its action requests.
 //!
+//! **Logging.** Readable status lines (boot, serving, shutdown, panic) are plain text on
+//! semihosting stdout (`hprintln!`), which the tests read. Everything else is logged with
+//! `defmt` (boot, session opened, plan loaded, episode start and end with counts, rejected
+//! requests, timeouts): feature `log-semihosting` (default, QEMU) writes the defmt frames
+//! to semihosting stderr ([`log`]); `cargo xtask qemu-log` decodes them. Feature `log-rtt`
+//! (`--no-default-features --features log-rtt`) uses `defmt-rtt` on hardware.
+//!
 //! A panic prints `PANIC: ...` over semihosting and exits with a failure status, so a test
 //! harness sees the failure instead of a hung emulator.
 //!
@@ -35,11 +42,23 @@
 #![no_std]
 #![no_main]
 
+#[cfg(all(feature = "log-semihosting", feature = "log-rtt"))]
+compile_error!("choose one defmt transport: feature `log-semihosting` or `log-rtt`");
+#[cfg(not(any(feature = "log-semihosting", feature = "log-rtt")))]
+compile_error!("choose a defmt transport: feature `log-semihosting` or `log-rtt`");
+
+#[cfg(feature = "log-semihosting")]
+mod log;
 mod usart;
+
+#[cfg(feature = "log-rtt")]
+use defmt_rtt as _;
 
 use activesense_core::agents::{AgentKind, BaselineAgent};
 use activesense_core::geometry::{unit, v2};
-use activesense_core::session::{Control, Session, SessionConfig, DEFAULT_TIMEOUT_MS};
+use activesense_core::session::{
+    Control, Session, SessionConfig, SessionEvent, DEFAULT_TIMEOUT_MS,
+};
 use activesense_core::FloorPlan;
 use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::syst::SystClkSource;
@@ -140,6 +159,7 @@ fn main() -> ! {
     let range_mm = match self_test() {
         Ok(r) => r,
         Err(msg) => {
+            defmt::error!("core self-test failed: {=str}", msg);
             hprintln!("activesense-firmware: core self-test FAILED: {}", msg);
             debug::exit(debug::EXIT_FAILURE);
             #[allow(clippy::empty_loop)]
@@ -151,10 +171,19 @@ fn main() -> ! {
         env!("CARGO_PKG_VERSION"),
         range_mm
     );
+    defmt::info!(
+        "boot: activesense-firmware {=str}, core self-test ok (range {=u32} mm)",
+        env!("CARGO_PKG_VERSION"),
+        range_mm
+    );
     if cmdline_has(b"smoke") {
+        defmt::info!("smoke mode: exit");
         debug::exit(debug::EXIT_SUCCESS);
     }
     let bench = cmdline_has(b"bench");
+    if bench {
+        defmt::info!("bench mode: SysTick interrupt only while idle");
+    }
 
     start_cycle_counter();
     let mut syst = cp.SYST;
@@ -175,11 +204,17 @@ fn main() -> ! {
         "activesense-firmware: serving protocol v{} on USART1",
         activesense_core::wire::PROTOCOL_VERSION
     );
+    defmt::info!(
+        "serving protocol v{=u16} on USART1",
+        activesense_core::wire::PROTOCOL_VERSION
+    );
     let mut buf = [0u8; 64];
     loop {
         if uart.read_ready().unwrap_or(false) {
             let n = uart.read(&mut buf).unwrap_or(0);
-            match session.feed(&buf[..n], millis(), &mut uart) {
+            let control = session.feed(&buf[..n], millis(), &mut uart);
+            log_events(session);
+            match control {
                 Ok(Control::Continue) => {}
                 Ok(Control::Shutdown) => {
                     hprintln!("activesense-firmware: shutdown");
@@ -188,6 +223,7 @@ fn main() -> ! {
                 Err(e) => match e {},
             }
         } else if session.poll(millis()) {
+            log_events(session);
             hprintln!("activesense-firmware: host silent, episode abandoned");
         } else {
             // Sleep until a byte arrives (USART1 IRQ) or the next SysTick. Under QEMU this
@@ -205,6 +241,43 @@ fn main() -> ! {
                 // A tick that pended meanwhile has already run (interrupts are enabled).
                 syst.disable_interrupt();
             }
+        }
+    }
+}
+
+/// Logs the session's queued events with defmt.
+fn log_events(session: &mut Session) {
+    while let Some(e) = session.take_event() {
+        match e {
+            SessionEvent::Opened => defmt::info!("session opened"),
+            SessionEvent::PlanLoaded { vertices } => {
+                defmt::info!("plan loaded: {=u8} vertices", vertices)
+            }
+            SessionEvent::EpisodeStarted {
+                rot_bins,
+                max_actions,
+            } => defmt::info!(
+                "episode start: K = {=u8}, max {=u16} actions",
+                rot_bins,
+                max_actions
+            ),
+            SessionEvent::EpisodeEnded(r) => defmt::info!(
+                "episode end: {} after {=u16} actions ({=u16} measurements, {=u16} no-return, \
+                 {=u16} rotations), recognised {}, {=u32} votes, finish {=u32} cycles",
+                defmt::Debug2Format(&r.end),
+                r.actions,
+                r.measurements,
+                r.no_returns,
+                r.rotations,
+                defmt::Debug2Format(&r.recognised),
+                r.cycles.vote.updates,
+                r.cycles.finish
+            ),
+            SessionEvent::Rejected(err) => {
+                defmt::warn!("request rejected: {}", defmt::Debug2Format(&err))
+            }
+            SessionEvent::TimedOut => defmt::warn!("host silent: episode abandoned"),
+            SessionEvent::Shutdown => defmt::info!("shutdown requested"),
         }
     }
 }

@@ -493,7 +493,22 @@ pub fn open_with_qemu_args(
 impl Link {
     /// Sends `Shutdown` and waits for the device side (thread / emulator) to stop.
     /// Returns the emulator's semihosting output for `qemu` links.
-    pub fn close(mut self) -> LinkResult<String> {
+    pub fn close(self) -> LinkResult<String> {
+        self.close_with_stderr().map(|(out, _)| out)
+    }
+
+    /// As [`Link::close`], also returning the emulator's raw stderr (the firmware's defmt
+    /// frames, see `cargo xtask qemu-log`); empty for other links.
+    pub fn close_with_stderr(self) -> LinkResult<(String, Vec<u8>)> {
+        let raw = self.qemu.as_ref().map(|q| q.stderr_handle());
+        let out = self.close_inner()?;
+        let raw = raw
+            .and_then(|r| r.lock().ok().map(|v| v.clone()))
+            .unwrap_or_default();
+        Ok((out, raw))
+    }
+
+    fn close_inner(mut self) -> LinkResult<String> {
         let r = self.client.shutdown();
         if let Some(h) = self.device_thread.take() {
             drop(self.client);

@@ -69,6 +69,10 @@ pub struct SimArgs {
     /// `--qemu-arg=-icount --qemu-arg=shift=0`.
     #[arg(long = "qemu-arg", allow_hyphen_values = true)]
     pub qemu_args: Vec<String>,
+    /// Write the emulator's raw stderr (the firmware's defmt log frames) to this file
+    /// (`qemu` links; decoded by `cargo xtask qemu-log`).
+    #[arg(long)]
+    pub defmt_out: Option<PathBuf>,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -206,10 +210,6 @@ fn print_totals(t: &Totals, secs: f64) {
         t.no_returns as f64 / n,
         t.cost / n
     );
-    println!(
-        "pending on the device: GHT localization (episodes end at the action limit, no coarse \
-         pose) and sparse registration (no refined pose)"
-    );
 }
 
 fn run_one(
@@ -281,7 +281,12 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
         }
     );
     print_totals(&t, start.elapsed().as_secs_f64());
-    let out = link.close().context("shutting the device down")?;
+    let (out, raw) = link
+        .close_with_stderr()
+        .context("shutting the device down")?;
+    if let Some(path) = &a.defmt_out {
+        std::fs::write(path, &raw).with_context(|| format!("writing {}", path.display()))?;
+    }
     for line in out.lines().filter(|l| !l.trim().is_empty()) {
         println!("device console: {line}");
     }
