@@ -75,9 +75,19 @@ struct Running {
     no_returns: u16,
     last_scan: u32,
     trace: TraceHash,
-    cycles: UpdateStats,
+    cycles: EpisodeCycles,
     update_start: u32,
+    /// What the update being timed did (set by `observe`).
+    update_kind: UpdateKind,
     stop: bool,
+}
+
+/// What an observed action did to the device's state (for the cycle statistics).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum UpdateKind {
+    Vote,
+    Rotation,
+    NoReturn,
 }
 
 /// The device's decision maker for one plan and one episode at a time.
@@ -221,8 +231,9 @@ impl Controller {
             // The scan is not used by the baseline agents; the learnt policy will read it.
             last_scan: p.initial_scan,
             trace: TraceHash::new(),
-            cycles: UpdateStats::default(),
+            cycles: EpisodeCycles::default(),
             update_start: self.now(),
+            update_kind: UpdateKind::Rotation,
             stop: false,
         });
         Ok(())
@@ -247,8 +258,15 @@ impl Controller {
 
     /// The next action request, or the end of the episode (which clears it). Repeats the
     /// pending request until it is observed. Without a running episode: `None`.
+    ///
+    /// **Timing.** One update spans from the start of [`Controller::observe`] to the end
+    /// of the decision here (booking the observation, the GHT vote and termination check
+    /// for a returned range, choosing the next action); the end-of-episode chain
+    /// ([`Pipeline::finish`]: coarse read-out, registration, recognition) is timed
+    /// separately into [`EpisodeCycles::finish`].
     pub fn next_step(&mut self) -> Option<Step> {
-        let now = self.now();
+        let clock = self.clock;
+        let now = || clock.map(|c| c()).unwrap_or(0);
         let r = self.running.as_mut()?;
         if let Some(action) = r.pending {
             return Some(Step::Act {
@@ -266,9 +284,13 @@ impl Controller {
                 action,
             })
         };
-        let cycles = now.wrapping_sub(r.update_start);
+        let cycles = now().wrapping_sub(r.update_start);
         if r.state.actions > 0 {
-            r.cycles.record(cycles);
+            match r.update_kind {
+                UpdateKind::Vote => r.cycles.vote.record(cycles),
+                UpdateKind::Rotation => r.cycles.rotation.record(cycles),
+                UpdateKind::NoReturn => r.cycles.no_return.record(cycles),
+            }
             self.cycles.record(cycles);
         }
         match step {
@@ -282,7 +304,9 @@ impl Controller {
                 let mut rep = Self::report(r, end);
                 self.running = None;
                 if let Some(plan) = self.plan.as_ref() {
+                    let t0 = now();
                     let result = self.pipeline.finish(plan);
+                    rep.cycles.finish = now().wrapping_sub(t0);
                     rep.coarse = result.coarse;
                     rep.refined = result.refined.map(|x| x.pose);
                     rep.recognised = result.recognised;
@@ -324,6 +348,11 @@ impl Controller {
         r.state.apply(action);
         r.trace.push(action, obs);
         r.last_scan = obs.scan;
+        r.update_kind = match (action, obs.range) {
+            (Action::Measure, Some(_)) => UpdateKind::Vote,
+            (Action::Measure, None) => UpdateKind::NoReturn,
+            _ => UpdateKind::Rotation,
+        };
         if action == Action::Measure {
             match obs.range {
                 Some(range) => {
@@ -378,8 +407,40 @@ pub enum ServeEnd {
     Eof,
 }
 
+/// Something a device log should record; queued by the [`Session`] and drained with
+/// [`Session::take_event`] (the oldest are dropped beyond [`MAX_EVENTS`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SessionEvent {
+    /// A `Hello` opened a session.
+    Opened,
+    /// A plan was loaded.
+    PlanLoaded {
+        /// Its vertex count.
+        vertices: u8,
+    },
+    /// An episode started.
+    EpisodeStarted {
+        /// Rotation bins K.
+        rot_bins: u8,
+        /// Action limit.
+        max_actions: u16,
+    },
+    /// An episode ended (`Done` or `Abort`).
+    EpisodeEnded(EpisodeReport),
+    /// A frame or request was answered with an error.
+    Rejected(WireError),
+    /// The host went silent; the running episode was abandoned.
+    TimedOut,
+    /// `Shutdown` was acknowledged.
+    Shutdown,
+}
+
+/// Capacity of the [`SessionEvent`] queue.
+pub const MAX_EVENTS: usize = 4;
+
 /// The device's protocol state machine.
 pub struct Session {
+    events: heapless::Deque<SessionEvent, MAX_EVENTS>,
     acc: FrameAccumulator,
     ctl: Controller,
     config: SessionConfig,
@@ -402,6 +463,7 @@ impl Session {
     /// A closed session (power-on state).
     pub const fn new(config: SessionConfig) -> Self {
         Session {
+            events: heapless::Deque::new(),
             acc: FrameAccumulator::new(),
             ctl: Controller::new(config.cycle_clock),
             config,
@@ -473,6 +535,18 @@ impl Session {
         }
     }
 
+    /// The oldest unread [`SessionEvent`].
+    pub fn take_event(&mut self) -> Option<SessionEvent> {
+        self.events.pop_front()
+    }
+
+    fn event(&mut self, e: SessionEvent) {
+        if self.events.is_full() {
+            self.events.pop_front();
+        }
+        let _ = self.events.push_back(e);
+    }
+
     /// Link counters.
     pub fn stats(&self) -> LinkStats {
         self.stats
@@ -492,6 +566,7 @@ impl Session {
         }
         self.acc.clear();
         if self.ctl.abort().is_some() {
+            self.event(SessionEvent::TimedOut);
             self.stats.timeouts = self.stats.timeouts.saturating_add(1);
             self.open = false;
             return true;
@@ -533,6 +608,7 @@ impl Session {
             };
             match decoded {
                 Err((e, id)) => {
+                    self.event(SessionEvent::Rejected(e.to_wire()));
                     self.stats.frames_bad = self.stats.frames_bad.saturating_add(1);
                     self.send(id, &Response::Error(e.to_wire()), out)?;
                 }
@@ -565,15 +641,18 @@ impl Session {
                         device: PROTOCOL_VERSION,
                     }
                 };
+                self.event(SessionEvent::Rejected(e));
                 self.send(id, &Response::Error(e), out)?;
                 return Ok(Control::Continue);
             }
             self.open = true;
+            self.event(SessionEvent::Opened);
             let info = self.device_info();
             self.send(id, &Response::Hello(info), out)?;
             return Ok(Control::Continue);
         }
         if !self.open {
+            self.event(SessionEvent::Rejected(WireError::NoSession));
             self.send(id, &Response::Error(WireError::NoSession), out)?;
             return Ok(Control::Continue);
         }
@@ -587,6 +666,9 @@ impl Session {
         let expected = next_id(self.last_id);
         if id != expected {
             self.stats.sequence_errors = self.stats.sequence_errors.saturating_add(1);
+            self.event(SessionEvent::Rejected(WireError::OutOfSequence {
+                expected,
+            }));
             self.send(
                 id,
                 &Response::Error(WireError::OutOfSequence { expected }),
@@ -596,7 +678,30 @@ impl Session {
         }
         self.last_id = id;
         self.reply_len = 0;
+        let started = match &req {
+            Request::StartEpisode(p) => Some(SessionEvent::EpisodeStarted {
+                rot_bins: p.rot_bins,
+                max_actions: p.max_actions,
+            }),
+            _ => None,
+        };
         let (resp, control) = self.handle(req);
+        match (&resp, started) {
+            (Response::Error(_), _) => {}
+            (_, Some(e)) => self.event(e),
+            _ => {}
+        }
+        match &resp {
+            Response::PlanLoaded(p) => self.event(SessionEvent::PlanLoaded {
+                vertices: p.vertices,
+            }),
+            Response::Done(r) | Response::Aborted(r) => self.event(SessionEvent::EpisodeEnded(*r)),
+            Response::Error(e) => self.event(SessionEvent::Rejected(*e)),
+            _ => {}
+        }
+        if control == Control::Shutdown {
+            self.event(SessionEvent::Shutdown);
+        }
         if let Response::Error(WireError::StepMismatch { .. }) = resp {
             self.stats.sequence_errors = self.stats.sequence_errors.saturating_add(1);
         }
@@ -854,6 +959,64 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert_eq!(s.controller().measurements().len(), 2);
+        // The event queue keeps the latest MAX_EVENTS: start, rejected step, end.
+        let events: Vec<_> = core::iter::from_fn(|| s.take_event()).collect();
+        assert!(matches!(
+            events.last(),
+            Some(SessionEvent::EpisodeEnded(r)) if r.actions == 12
+        ));
+        assert!(events.contains(&SessionEvent::EpisodeStarted {
+            rot_bins: 10,
+            max_actions: 12
+        }));
+        assert!(
+            events.contains(&SessionEvent::Rejected(WireError::StepMismatch {
+                expected: 2
+            }))
+        );
+        assert_eq!(s.take_event(), None);
+    }
+
+    static TICKS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+    /// A clock that advances by 7 per reading.
+    fn tick7() -> u32 {
+        TICKS.fetch_add(7, core::sync::atomic::Ordering::Relaxed)
+    }
+
+    #[test]
+    fn cycle_statistics_split_by_update_kind() {
+        let mut ctl = Controller::new(Some(tick7));
+        let plan = FloorPlan::from_raw(HVec::from_slice(&square()).unwrap()).unwrap();
+        ctl.load_plan(plan);
+        ctl.start(&params(40)).unwrap();
+        let mut k = 0;
+        let rep = loop {
+            match ctl.next_step().unwrap() {
+                Step::Act { step, action } => {
+                    // Every other measurement gets no return.
+                    let range = (action == Action::Measure).then_some(1.25);
+                    let range = if range.is_some() {
+                        k += 1;
+                        range.filter(|_| k % 2 == 1)
+                    } else {
+                        None
+                    };
+                    ctl.observe(step, &Observation { range, scan: 0 }).unwrap();
+                }
+                Step::Done(rep) => break rep,
+            }
+        };
+        let c = rep.cycles;
+        assert!(rep.no_returns > 0 && rep.measurements > rep.no_returns);
+        assert_eq!(c.vote.updates, (rep.measurements - rep.no_returns) as u32);
+        assert_eq!(c.no_return.updates, rep.no_returns as u32);
+        assert_eq!(c.rotation.updates, rep.rotations as u32);
+        assert_eq!(c.updates().updates, rep.actions as u32);
+        // Each update reads the clock twice (observe start, decision end): 7 ticks apart.
+        assert_eq!(c.vote.max_cycles, 7);
+        assert_eq!(c.updates().total_cycles, 7 * rep.actions as u64);
+        assert_eq!(c.finish, 7);
+        assert_eq!(ctl.cycles(), c.updates());
     }
 
     #[test]
@@ -996,6 +1159,11 @@ mod tests {
     #[test]
     fn largest_replies_fit() {
         let s = Session::new(CFG);
+        let max_stats = UpdateStats {
+            updates: u32::MAX,
+            total_cycles: u64::MAX,
+            max_cycles: u32::MAX,
+        };
         let rep = EpisodeReport {
             end: EpisodeEnd::Aborted,
             actions: u16::MAX,
@@ -1008,10 +1176,11 @@ mod tests {
             coarse: Some(Pose2::new(1.0, 2.0, 3.0)),
             refined: Some(Pose2::new(1.0, 2.0, 3.0)),
             recognised: Some(true),
-            cycles: UpdateStats {
-                updates: u32::MAX,
-                total_cycles: u64::MAX,
-                max_cycles: u32::MAX,
+            cycles: EpisodeCycles {
+                vote: max_stats,
+                rotation: max_stats,
+                no_return: max_stats,
+                finish: u32::MAX,
             },
         };
         let mut info = s.device_info();
@@ -1030,7 +1199,7 @@ mod tests {
                 timeouts: u32::MAX,
                 episodes: u32::MAX,
             },
-            cycles: rep.cycles,
+            cycles: max_stats,
         };
         for r in [
             Response::Done(rep),

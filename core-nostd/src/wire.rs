@@ -25,7 +25,7 @@ use heapless::{String as HString, Vec as HVec};
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 /// Protocol version; bumped on every incompatible change of a message or of the framing.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 /// The id carried by device replies to frames whose own id could not be read.
 pub const NO_ID: u16 = 0;
 /// Largest CRC-protected payload (postcard bytes + 4 CRC bytes).
@@ -213,7 +213,12 @@ pub enum EpisodeEnd {
     Aborted,
 }
 
-/// Cycle statistics of the device's per-action update (decide + book observation).
+/// Cycle statistics of the device's per-action update: book the observation (for a
+/// returned range: the GHT vote and the termination check) and choose the next action.
+///
+/// "Cycles" are ticks of the device's cycle clock (`SessionConfig::cycle_clock`); the
+/// firmware uses TIM2, which under QEMU with `-icount shift=0` advances by exactly one per
+/// executed guest instruction (see `firmware/src/main.rs` and `cargo xtask mcu-bench`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct UpdateStats {
     /// Updates measured.
@@ -230,6 +235,33 @@ impl UpdateStats {
         self.updates = self.updates.saturating_add(1);
         self.total_cycles = self.total_cycles.saturating_add(cycles as u64);
         self.max_cycles = self.max_cycles.max(cycles);
+    }
+}
+
+/// Per-episode cycle statistics, split by what the update did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EpisodeCycles {
+    /// Updates after a measurement with a return (localizer vote + termination check).
+    pub vote: UpdateStats,
+    /// Updates after a rotation (no vote).
+    pub rotation: UpdateStats,
+    /// Updates after a measurement without a return (no vote).
+    pub no_return: UpdateStats,
+    /// The end-of-episode chain: coarse read-out of the belief, sparse registration and
+    /// symmetry recognition (0 for an aborted episode).
+    pub finish: u32,
+}
+
+impl EpisodeCycles {
+    /// All per-action updates together (vote + rotation + no-return).
+    pub fn updates(&self) -> UpdateStats {
+        let mut all = self.vote;
+        for s in [self.rotation, self.no_return] {
+            all.updates = all.updates.saturating_add(s.updates);
+            all.total_cycles = all.total_cycles.saturating_add(s.total_cycles);
+            all.max_cycles = all.max_cycles.max(s.max_cycles);
+        }
+        all
     }
 }
 
@@ -260,8 +292,8 @@ pub struct EpisodeReport {
     pub refined: Option<Pose2>,
     /// Coarse success against the ground truth, when one was supplied.
     pub recognised: Option<bool>,
-    /// Cycle statistics of this episode's updates.
-    pub cycles: UpdateStats,
+    /// Cycle statistics of this episode's updates and of its end-of-episode chain.
+    pub cycles: EpisodeCycles,
 }
 
 /// Session phase as reported by `Status`.

@@ -7,10 +7,22 @@
 //! **Modes** (semihosting command line, i.e. QEMU `-semihosting-config ...,arg=smoke` or
 //! `-append smoke`):
 //! * `smoke`: exit with status 0 right after the boot line (`cargo xtask qemu-smoke`).
+//! * `bench`: serve the protocol as by default, but with the SysTick interrupt enabled
+//!   only while the core sleeps waiting for the host, so no tick handler runs inside a
+//!   timed update (`cargo xtask mcu-bench`). The millisecond clock then counts idle time
+//!   only. (The tick must stay on while idle: QEMU with `-icount` and no timer armed can
+//!   miss the USART wake-up.)
 //! * default: serve the serial protocol (`docs/protocol.md`,
 //!   [`activesense_core::session`]) on USART1 (QEMU `serial0`) until the host sends
 //!   `Shutdown`; then print `activesense-firmware: shutdown` and exit with status 0.
 //!   The firmware owns the decisions; in simulation the host answers its action requests.
+//!
+//! **Logging.** Readable status lines (boot, serving, shutdown, panic) are plain text on
+//! semihosting stdout (`hprintln!`), which the tests read. Everything else is logged with
+//! `defmt` (boot, session opened, plan loaded, episode start and end with counts, rejected
+//! requests, timeouts): feature `log-semihosting` (default, QEMU) writes the defmt frames
+//! to semihosting stderr ([`log`]); `cargo xtask qemu-log` decodes them. Feature `log-rtt`
+//! (`--no-default-features --features log-rtt`) uses `defmt-rtt` on hardware.
 //!
 //! A panic prints `PANIC: ...` over semihosting and exits with a failure status, so a test
 //! harness sees the failure instead of a hung emulator.
@@ -18,16 +30,35 @@
 //! **Clocks.** SysTick runs from the core clock, assumed to be 168 MHz (QEMU's
 //! netduinoplus2 models SYSCLK at 168 MHz; real hardware needs the PLL set up first,
 //! which this firmware does not do yet). It provides the millisecond clock for the host
-//! silence timeout and the cycle counter for the per-update statistics (under QEMU these
-//! are virtual-time cycles, not real M4F cycles).
+//! silence timeout.
+//!
+//! The cycle counter of the per-update statistics is the free-running 32-bit TIM2
+//! counter (prescaler 1). On hardware after reset (HSI 16 MHz, APB1 undivided) TIM2
+//! counts core clock cycles. QEMU models the STM32 timers at 1 GHz of *virtual* time, so
+//! under `-icount shift=0` (every guest instruction advances virtual time by exactly
+//! 2^0 ns) one TIM2 tick is exactly one executed guest instruction: `cargo xtask
+//! mcu-bench` reports these as instructions. Without `-icount` the ticks are host-paced
+//! virtual nanoseconds and mean little.
 #![no_std]
 #![no_main]
 
+#[cfg(all(feature = "log-semihosting", feature = "log-rtt"))]
+compile_error!("choose one defmt transport: feature `log-semihosting` or `log-rtt`");
+#[cfg(not(any(feature = "log-semihosting", feature = "log-rtt")))]
+compile_error!("choose a defmt transport: feature `log-semihosting` or `log-rtt`");
+
+#[cfg(feature = "log-semihosting")]
+mod log;
 mod usart;
+
+#[cfg(feature = "log-rtt")]
+use defmt_rtt as _;
 
 use activesense_core::agents::{AgentKind, BaselineAgent};
 use activesense_core::geometry::{unit, v2};
-use activesense_core::session::{Control, Session, SessionConfig, DEFAULT_TIMEOUT_MS};
+use activesense_core::session::{
+    Control, Session, SessionConfig, SessionEvent, DEFAULT_TIMEOUT_MS,
+};
 use activesense_core::FloorPlan;
 use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::syst::SystClkSource;
@@ -51,20 +82,26 @@ fn millis() -> u32 {
     MILLIS.load(Ordering::Relaxed)
 }
 
-/// Core-clock cycles since boot (mod 2^32), from the SysTick count.
-fn cycles() -> u32 {
-    loop {
-        let ms = millis();
-        // SYST_CVR counts down from TICK_RELOAD.
-        // SAFETY: read-only access to the SysTick current-value register.
-        let val = unsafe { (*cortex_m::peripheral::SYST::PTR).cvr.read() } & 0x00FF_FFFF;
-        // A tick between the two reads would pair a new count with an old millisecond.
-        if millis() == ms {
-            return ms
-                .wrapping_mul(TICK_RELOAD + 1)
-                .wrapping_add(TICK_RELOAD.saturating_sub(val));
-        }
+const RCC_APB1ENR: usize = 0x4002_3840;
+const TIM2_CR1: usize = 0x4000_0000;
+const TIM2_CNT: usize = 0x4000_0024;
+
+/// Starts TIM2 as a free-running up-counter (reset values: prescaler 1, ARR 0xFFFF_FFFF).
+fn start_cycle_counter() {
+    // SAFETY: fixed, aligned STM32F405 registers; RCC_APB1ENR bit 0 = TIM2EN,
+    // TIM2_CR1 bit 0 = CEN. Nothing else uses TIM2.
+    unsafe {
+        let en = core::ptr::read_volatile(RCC_APB1ENR as *const u32);
+        core::ptr::write_volatile(RCC_APB1ENR as *mut u32, en | 1);
+        core::ptr::write_volatile(TIM2_CR1 as *mut u32, 1);
     }
+}
+
+/// TIM2 ticks since it started (mod 2^32): core cycles on hardware, executed instructions
+/// under QEMU `-icount shift=0` (see the crate docs).
+fn cycles() -> u32 {
+    // SAFETY: read-only access to the TIM2 counter register.
+    unsafe { core::ptr::read_volatile(TIM2_CNT as *const u32) }
 }
 
 /// USART1's interrupt (IRQ 37) only wakes the core from `wfi`. The line stays high until
@@ -118,10 +155,11 @@ fn cmdline_has(word: &[u8]) -> bool {
 
 #[entry]
 fn main() -> ! {
-    let mut cp = cortex_m::Peripherals::take().unwrap();
+    let cp = cortex_m::Peripherals::take().unwrap();
     let range_mm = match self_test() {
         Ok(r) => r,
         Err(msg) => {
+            defmt::error!("core self-test failed: {=str}", msg);
             hprintln!("activesense-firmware: core self-test FAILED: {}", msg);
             debug::exit(debug::EXIT_FAILURE);
             #[allow(clippy::empty_loop)]
@@ -133,15 +171,29 @@ fn main() -> ! {
         env!("CARGO_PKG_VERSION"),
         range_mm
     );
+    defmt::info!(
+        "boot: activesense-firmware {=str}, core self-test ok (range {=u32} mm)",
+        env!("CARGO_PKG_VERSION"),
+        range_mm
+    );
     if cmdline_has(b"smoke") {
+        defmt::info!("smoke mode: exit");
         debug::exit(debug::EXIT_SUCCESS);
     }
+    let bench = cmdline_has(b"bench");
+    if bench {
+        defmt::info!("bench mode: SysTick interrupt only while idle");
+    }
 
-    cp.SYST.set_clock_source(SystClkSource::Core);
-    cp.SYST.set_reload(TICK_RELOAD);
-    cp.SYST.clear_current();
-    cp.SYST.enable_interrupt();
-    cp.SYST.enable_counter();
+    start_cycle_counter();
+    let mut syst = cp.SYST;
+    syst.set_clock_source(SystClkSource::Core);
+    syst.set_reload(TICK_RELOAD);
+    syst.clear_current();
+    if !bench {
+        syst.enable_interrupt();
+    }
+    syst.enable_counter();
 
     let mut uart = usart::Usart1::init(115_200, CORE_HZ / 2);
     usart::enable_rx_interrupt();
@@ -152,11 +204,17 @@ fn main() -> ! {
         "activesense-firmware: serving protocol v{} on USART1",
         activesense_core::wire::PROTOCOL_VERSION
     );
+    defmt::info!(
+        "serving protocol v{=u16} on USART1",
+        activesense_core::wire::PROTOCOL_VERSION
+    );
     let mut buf = [0u8; 64];
     loop {
         if uart.read_ready().unwrap_or(false) {
             let n = uart.read(&mut buf).unwrap_or(0);
-            match session.feed(&buf[..n], millis(), &mut uart) {
+            let control = session.feed(&buf[..n], millis(), &mut uart);
+            log_events(session);
+            match control {
                 Ok(Control::Continue) => {}
                 Ok(Control::Shutdown) => {
                     hprintln!("activesense-firmware: shutdown");
@@ -165,6 +223,7 @@ fn main() -> ! {
                 Err(e) => match e {},
             }
         } else if session.poll(millis()) {
+            log_events(session);
             hprintln!("activesense-firmware: host silent, episode abandoned");
         } else {
             // Sleep until a byte arrives (USART1 IRQ) or the next SysTick. Under QEMU this
@@ -172,9 +231,53 @@ fn main() -> ! {
             cortex_m::peripheral::NVIC::unpend(usart::Usart1Irq);
             // SAFETY: as at start-up; DefaultHandler only masks the line again.
             unsafe { cortex_m::peripheral::NVIC::unmask(usart::Usart1Irq) };
+            if bench {
+                syst.enable_interrupt();
+            }
             if !uart.read_ready().unwrap_or(false) {
                 cortex_m::asm::wfi();
             }
+            if bench {
+                // A tick that pended meanwhile has already run (interrupts are enabled).
+                syst.disable_interrupt();
+            }
+        }
+    }
+}
+
+/// Logs the session's queued events with defmt.
+fn log_events(session: &mut Session) {
+    while let Some(e) = session.take_event() {
+        match e {
+            SessionEvent::Opened => defmt::info!("session opened"),
+            SessionEvent::PlanLoaded { vertices } => {
+                defmt::info!("plan loaded: {=u8} vertices", vertices)
+            }
+            SessionEvent::EpisodeStarted {
+                rot_bins,
+                max_actions,
+            } => defmt::info!(
+                "episode start: K = {=u8}, max {=u16} actions",
+                rot_bins,
+                max_actions
+            ),
+            SessionEvent::EpisodeEnded(r) => defmt::info!(
+                "episode end: {} after {=u16} actions ({=u16} measurements, {=u16} no-return, \
+                 {=u16} rotations), recognised {}, {=u32} votes, finish {=u32} cycles",
+                defmt::Debug2Format(&r.end),
+                r.actions,
+                r.measurements,
+                r.no_returns,
+                r.rotations,
+                defmt::Debug2Format(&r.recognised),
+                r.cycles.vote.updates,
+                r.cycles.finish
+            ),
+            SessionEvent::Rejected(err) => {
+                defmt::warn!("request rejected: {}", defmt::Debug2Format(&err))
+            }
+            SessionEvent::TimedOut => defmt::warn!("host silent: episode abandoned"),
+            SessionEvent::Shutdown => defmt::info!("shutdown requested"),
         }
     }
 }

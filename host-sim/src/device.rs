@@ -268,6 +268,7 @@ pub fn spawn_loopback(mut device: Pipe) -> std::thread::JoinHandle<()> {
 pub struct Qemu {
     child: Option<Child>,
     output: Arc<Mutex<String>>,
+    stderr: Arc<Mutex<Vec<u8>>>,
 }
 
 /// The emulator binary (`ACTIVESENSE_QEMU` overrides).
@@ -279,6 +280,16 @@ impl Qemu {
     /// Starts the emulator on `elf` and waits (up to 10 s) for it to connect USART1.
     /// Returns the emulator and the connected stream (read timeout `timeout`).
     pub fn start(elf: &Path, timeout: Duration) -> LinkResult<(Qemu, std::net::TcpStream)> {
+        Self::start_with_args(elf, timeout, &[])
+    }
+
+    /// As [`Qemu::start`], with `extra` appended to the emulator's command line (e.g.
+    /// `-icount shift=0` for instruction counting, `-append bench` for the firmware).
+    pub fn start_with_args(
+        elf: &Path,
+        timeout: Duration,
+        extra: &[String],
+    ) -> LinkResult<(Qemu, std::net::TcpStream)> {
         if !elf.is_file() {
             return Err(LinkError::Local(format!(
                 "firmware ELF not found at {} (build it with `cargo build -p activesense-firmware \
@@ -302,13 +313,15 @@ impl Qemu {
                 "-kernel",
             ])
             .arg(elf)
+            .args(extra)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
             .map_err(|e| LinkError::Local(format!("cannot start {}: {e}", qemu_binary())))?;
         let output = Arc::new(Mutex::new(String::new()));
-        for pipe in [
+        let stderr = Arc::new(Mutex::new(Vec::new()));
+        for (is_stderr, pipe) in [false, true].into_iter().zip([
             child
                 .stdout
                 .take()
@@ -317,11 +330,10 @@ impl Qemu {
                 .stderr
                 .take()
                 .map(|p| Box::new(p) as Box<dyn Read + Send>),
-        ]
-        .into_iter()
-        .flatten()
-        {
+        ]) {
+            let Some(pipe) = pipe else { continue };
             let out = output.clone();
+            let raw = stderr.clone();
             std::thread::spawn(move || {
                 let mut pipe = pipe;
                 let mut buf = [0u8; 512];
@@ -329,7 +341,11 @@ impl Qemu {
                     if n == 0 {
                         break;
                     }
-                    if let Ok(mut o) = out.lock() {
+                    if is_stderr {
+                        if let Ok(mut r) = raw.lock() {
+                            r.extend_from_slice(&buf[..n]);
+                        }
+                    } else if let Ok(mut o) = out.lock() {
                         o.push_str(&String::from_utf8_lossy(&buf[..n]));
                     }
                 }
@@ -338,6 +354,7 @@ impl Qemu {
         let mut qemu = Qemu {
             child: Some(child),
             output,
+            stderr,
         };
         listener.set_nonblocking(true)?;
         let deadline = Instant::now() + Duration::from_secs(10);
@@ -349,14 +366,14 @@ impl Qemu {
                         if let Ok(Some(status)) = c.try_wait() {
                             return Err(LinkError::Local(format!(
                                 "qemu exited ({status}) before connecting: {}",
-                                qemu.output()
+                                qemu.diagnostics()
                             )));
                         }
                     }
                     if Instant::now() > deadline {
                         return Err(LinkError::Local(format!(
                             "qemu did not connect its serial port within 10 s: {}",
-                            qemu.output()
+                            qemu.diagnostics()
                         )));
                     }
                     std::thread::sleep(Duration::from_millis(10));
@@ -397,16 +414,37 @@ impl Qemu {
         if let Err(e) = announced {
             return Err(LinkError::Local(format!(
                 "firmware did not start: {e}: {}",
-                qemu.output()
+                qemu.diagnostics()
             )));
         }
         stream.set_read_timeout(Some(timeout))?;
         Ok((qemu, stream))
     }
 
-    /// Semihosting console output so far.
+    /// The emulator's stderr bytes so far, unaltered: the firmware's defmt frames
+    /// (semihosting stderr) and any QEMU diagnostics.
+    pub fn stderr_bytes(&self) -> Vec<u8> {
+        self.stderr.lock().map(|o| o.clone()).unwrap_or_default()
+    }
+
+    /// A handle on the raw stderr buffer that outlives [`Qemu::wait`].
+    pub fn stderr_handle(&self) -> Arc<Mutex<Vec<u8>>> {
+        self.stderr.clone()
+    }
+
+    /// Semihosting console output (the emulator's stdout) so far.
     pub fn output(&self) -> String {
         self.output.lock().map(|o| o.clone()).unwrap_or_default()
+    }
+
+    /// Console output plus the emulator's stderr (lossy text: QEMU diagnostics, and the
+    /// firmware's binary defmt frames) for error messages.
+    pub fn diagnostics(&self) -> String {
+        format!(
+            "{}{}",
+            self.output(),
+            String::from_utf8_lossy(&self.stderr_bytes())
+        )
     }
 
     /// Waits for the emulator to exit; returns its output, or an error when it exits
@@ -421,12 +459,12 @@ impl Qemu {
             if let Some(status) = child.try_wait()? {
                 // Let the reader threads drain the pipes.
                 std::thread::sleep(Duration::from_millis(50));
-                let out = self.output();
                 return if status.success() {
-                    Ok(out)
+                    Ok(self.output())
                 } else {
                     Err(LinkError::Local(format!(
-                        "qemu exited with {status}: {out}"
+                        "qemu exited with {status}: {}",
+                        self.diagnostics()
                     )))
                 };
             }
@@ -435,7 +473,7 @@ impl Qemu {
                 let _ = child.wait();
                 return Err(LinkError::Local(format!(
                     "qemu did not exit within {timeout:?}; killed: {}",
-                    self.output()
+                    self.diagnostics()
                 )));
             }
             std::thread::sleep(Duration::from_millis(10));

@@ -437,6 +437,16 @@ pub struct Link {
 
 /// Opens the transport named by `spec` with reply timeout `timeout`.
 pub fn open(spec: &LinkSpec, timeout: Duration) -> LinkResult<Link> {
+    open_with_qemu_args(spec, timeout, &[])
+}
+
+/// As [`open`]; a `qemu` link gets `qemu_args` appended to the emulator's command line
+/// (ignored by the other transports).
+pub fn open_with_qemu_args(
+    spec: &LinkSpec,
+    timeout: Duration,
+    qemu_args: &[String],
+) -> LinkResult<Link> {
     match spec {
         LinkSpec::Loopback => {
             let (host, device) = Pipe::pair(timeout);
@@ -470,7 +480,7 @@ pub fn open(spec: &LinkSpec, timeout: Duration) -> LinkResult<Link> {
             })
         }
         LinkSpec::Qemu(elf) => {
-            let (qemu, stream) = Qemu::start(elf, timeout)?;
+            let (qemu, stream) = Qemu::start_with_args(elf, timeout, qemu_args)?;
             Ok(Link {
                 client: Client::new(Box::new(stream)),
                 qemu: Some(qemu),
@@ -483,7 +493,22 @@ pub fn open(spec: &LinkSpec, timeout: Duration) -> LinkResult<Link> {
 impl Link {
     /// Sends `Shutdown` and waits for the device side (thread / emulator) to stop.
     /// Returns the emulator's semihosting output for `qemu` links.
-    pub fn close(mut self) -> LinkResult<String> {
+    pub fn close(self) -> LinkResult<String> {
+        self.close_with_stderr().map(|(out, _)| out)
+    }
+
+    /// As [`Link::close`], also returning the emulator's raw stderr (the firmware's defmt
+    /// frames, see `cargo xtask qemu-log`); empty for other links.
+    pub fn close_with_stderr(self) -> LinkResult<(String, Vec<u8>)> {
+        let raw = self.qemu.as_ref().map(|q| q.stderr_handle());
+        let out = self.close_inner()?;
+        let raw = raw
+            .and_then(|r| r.lock().ok().map(|v| v.clone()))
+            .unwrap_or_default();
+        Ok((out, raw))
+    }
+
+    fn close_inner(mut self) -> LinkResult<String> {
         let r = self.client.shutdown();
         if let Some(h) = self.device_thread.take() {
             drop(self.client);

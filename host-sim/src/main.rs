@@ -37,6 +37,9 @@ enum Command {
     Sim(activesense_sim::remote::SimArgs),
     /// Talk to an instrument controller on a serial port.
     Serial(activesense_sim::remote::SerialArgs),
+    /// Count the firmware's instructions per update and per registration under QEMU
+    /// (-icount shift=0); prints a markdown table (see `cargo xtask mcu-bench`).
+    McuBench(activesense_sim::remote::McuBenchArgs),
     /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
     Dataset(DatasetArgs),
     /// Evaluate agents on the test plans (the paper's Table 4): writes results.json,
@@ -268,6 +271,7 @@ fn main() -> ExitCode {
         Command::BenchLocalization(a) => cmd_bench_localization(a),
         Command::Sim(a) => activesense_sim::remote::cmd_sim(a),
         Command::Serial(a) => activesense_sim::remote::cmd_serial(a),
+        Command::McuBench(a) => activesense_sim::remote::cmd_mcu_bench(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -18,7 +18,7 @@ use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_core::instrument::run_local;
 use activesense_core::session::Controller;
-use activesense_core::wire::{EpisodeParams, EpisodeReport};
+use activesense_core::wire::{EpisodeParams, EpisodeReport, UpdateStats};
 use activesense_core::FloorPlan;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
@@ -64,6 +64,14 @@ pub struct SimArgs {
     /// First plan seed (default: the first test plan).
     #[arg(long, default_value_t = TEST_SEEDS.start)]
     pub first_seed: u32,
+    /// Extra argument for qemu-system-arm (`qemu` links only; repeatable), e.g.
+    /// `--qemu-arg=-icount --qemu-arg=shift=0`.
+    #[arg(long = "qemu-arg", allow_hyphen_values = true)]
+    pub qemu_args: Vec<String>,
+    /// Write the emulator's raw stderr (the firmware's defmt log frames) to this file
+    /// (`qemu` links; decoded by `cargo xtask qemu-log`).
+    #[arg(long)]
+    pub defmt_out: Option<PathBuf>,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -161,6 +169,10 @@ struct Totals {
     cost: f64,
 }
 
+fn mean_cycles(s: &UpdateStats) -> u64 {
+    s.total_cycles / s.updates.max(1) as u64
+}
+
 fn print_run(label: &str, run: &EpisodeRun, t: &mut Totals) {
     let r = &run.report;
     let pose = |p: Option<activesense_core::Pose2>| {
@@ -169,7 +181,7 @@ fn print_run(label: &str, run: &EpisodeRun, t: &mut Totals) {
     };
     println!(
         "{label}: {:?} after {} actions ({} measurements, {} no-return, {} rotations), cost {:.3}, \
-         coarse {}, refined {}{}, trace {:08x}, cycles/update mean {} max {}",
+         coarse {}, refined {}{}, trace {:08x}, cycles/update mean {} max {} (vote mean {}, rotation mean {}), finish {}",
         r.end,
         r.actions,
         r.measurements,
@@ -184,8 +196,11 @@ fn print_run(label: &str, run: &EpisodeRun, t: &mut Totals) {
             None => "",
         },
         r.trace_hash,
-        r.cycles.total_cycles / r.cycles.updates.max(1) as u64,
-        r.cycles.max_cycles
+        mean_cycles(&r.cycles.updates()),
+        r.cycles.updates().max_cycles,
+        mean_cycles(&r.cycles.vote),
+        mean_cycles(&r.cycles.rotation),
+        r.cycles.finish
     );
     t.episodes += 1;
     t.actions += r.actions as u64;
@@ -238,7 +253,8 @@ fn run_one(
 /// `activesense sim`.
 pub fn cmd_sim(a: SimArgs) -> Result<()> {
     let timeout = Duration::from_millis(a.episode.timeout_ms);
-    let mut link = link::open(&a.link, timeout).with_context(|| format!("opening {:?}", a.link))?;
+    let mut link = link::open_with_qemu_args(&a.link, timeout, &a.qemu_args)
+        .with_context(|| format!("opening {:?}", a.link))?;
     let info = link.client.hello().context("handshake")?;
     println!(
         "device: {} (protocol v{}, capabilities {:#x}, max {} vertices, max {} actions)",
@@ -275,7 +291,12 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
         }
     );
     print_totals(&t, start.elapsed().as_secs_f64());
-    let out = link.close().context("shutting the device down")?;
+    let (out, raw) = link
+        .close_with_stderr()
+        .context("shutting the device down")?;
+    if let Some(path) = &a.defmt_out {
+        std::fs::write(path, &raw).with_context(|| format!("writing {}", path.display()))?;
+    }
     for line in out.lines().filter(|l| !l.trim().is_empty()) {
         println!("device console: {line}");
     }
@@ -372,4 +393,207 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// `activesense mcu-bench`.
+#[derive(Args, Debug)]
+pub struct McuBenchArgs {
+    /// Firmware ELF run in qemu-system-arm.
+    #[arg(long, default_value = link::DEFAULT_ELF)]
+    pub elf: PathBuf,
+    /// Episodes per rotation-bin setting (plan seeds first-seed, first-seed+1, ...).
+    #[arg(long, default_value_t = 10)]
+    pub episodes: u32,
+    /// First plan seed (default: the first test plan).
+    #[arg(long, default_value_t = TEST_SEEDS.start)]
+    pub first_seed: u32,
+    /// Agent: blind-0..2, heuristic-0..3.
+    #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
+    pub agent: AgentKind,
+    /// Episode seed (placement, noise and agent randomness).
+    #[arg(long, default_value_t = 0)]
+    pub episode_seed: u64,
+    /// When the device stops an episode (see `sim --termination`).
+    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    pub termination: activesense_core::pipeline::Termination,
+    /// Reply timeout in milliseconds.
+    #[arg(long, default_value_t = 60_000)]
+    pub timeout_ms: u64,
+}
+
+/// Instruction statistics of one kind of device work over many episodes.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct InstrStats {
+    /// Timed events.
+    pub count: u64,
+    /// Sum of instructions.
+    pub total: u64,
+    /// Largest single event.
+    pub max: u64,
+}
+
+impl InstrStats {
+    fn add(&mut self, s: &UpdateStats) {
+        self.count += s.updates as u64;
+        self.total += s.total_cycles;
+        self.max = self.max.max(s.max_cycles as u64);
+    }
+
+    fn add_one(&mut self, v: u32) {
+        self.count += 1;
+        self.total += v as u64;
+        self.max = self.max.max(v as u64);
+    }
+
+    /// Mean per event (0 without events).
+    pub fn mean(&self) -> f64 {
+        self.total as f64 / self.count.max(1) as f64
+    }
+
+    /// `mean / max` instructions with the 168 MHz time estimate, as a table cell.
+    fn cell(&self) -> String {
+        if self.count == 0 {
+            return "–".into();
+        }
+        let us = |i: f64| i / MCU_HZ * 1e6;
+        format!(
+            "{:.0} / {} ({} / {} µs)",
+            self.mean(),
+            self.max,
+            fmt_us(us(self.mean())),
+            fmt_us(us(self.max as f64))
+        )
+    }
+}
+
+fn fmt_us(us: f64) -> String {
+    if us >= 1000.0 {
+        format!("{:.0}", us)
+    } else {
+        format!("{:.1}", us)
+    }
+}
+
+/// Core clock of the target STM32F405 (Hz) for the time estimates.
+pub const MCU_HZ: f64 = 168e6;
+
+/// The firmware's per-episode instruction counts for one rotation-bin setting.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct McuBenchRow {
+    /// Rotation bins K.
+    pub rot_bins: u8,
+    /// Episodes run.
+    pub episodes: u32,
+    /// Updates after a returned measurement (GHT vote).
+    pub vote: InstrStats,
+    /// Updates after a rotation.
+    pub rotation: InstrStats,
+    /// Updates after a measurement without return.
+    pub no_return: InstrStats,
+    /// End-of-episode chain (coarse read-out, registration, recognition).
+    pub finish: InstrStats,
+}
+
+/// Runs `a.episodes` episodes for K = 1 and K = 10 against the firmware in QEMU with
+/// `-icount shift=0` and the firmware's `bench` mode, and returns the instruction counts.
+pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
+    let timeout = Duration::from_millis(a.timeout_ms);
+    let qemu_args: Vec<String> = ["-icount", "shift=0", "-append", "bench"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let spec = LinkSpec::Qemu(a.elf.clone());
+    let mut link = link::open_with_qemu_args(&spec, timeout, &qemu_args)
+        .with_context(|| format!("starting {} in QEMU", a.elf.display()))?;
+    let info = link.client.hello().context("handshake")?;
+    if info.capabilities & activesense_core::wire::CAP_CYCLE_COUNTS == 0 {
+        bail!("the firmware reports no cycle counts");
+    }
+    let mut rows = Vec::new();
+    for rot_bins in [1u8, 10] {
+        let ep = RemoteEpisodeArgs {
+            episodes: a.episodes,
+            agent: a.agent,
+            rot_bins,
+            max_actions: EVAL_MAX_ACTIONS,
+            episode_seed: a.episode_seed,
+            termination: a.termination,
+            timeout_ms: a.timeout_ms,
+            verify: false,
+        };
+        let mut row = McuBenchRow {
+            rot_bins,
+            ..Default::default()
+        };
+        for i in 0..a.episodes {
+            let seed = a.first_seed.wrapping_add(i);
+            let (plan, params, inst) = sim_episode(&spec_for(seed, &ep)?);
+            let run = run_one(&mut link, &plan, &params, inst, None)
+                .with_context(|| format!("K = {rot_bins}, episode on plan {seed}"))?;
+            let c = run.report.cycles;
+            row.episodes += 1;
+            row.vote.add(&c.vote);
+            row.rotation.add(&c.rotation);
+            row.no_return.add(&c.no_return);
+            row.finish.add_one(c.finish);
+        }
+        rows.push(row);
+    }
+    let out = link.close().context("shutting the device down")?;
+    if !out.contains("core initialised") {
+        bail!("unexpected firmware console output: {out}");
+    }
+    Ok(rows)
+}
+
+/// The markdown table of [`mcu_bench`]'s rows.
+pub fn mcu_bench_table(rows: &[McuBenchRow]) -> String {
+    let mut s = String::from(
+        "| K | episodes | measurement update (GHT vote) | rotation update | no-return update | \
+         end of episode (registration) |\n|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            r.rot_bins,
+            r.episodes,
+            r.vote.cell(),
+            r.rotation.cell(),
+            r.no_return.cell(),
+            r.finish.cell()
+        ));
+    }
+    s.push_str(&format!(
+        "\nCells: mean / max guest instructions per event (updates counted: {}), and in \
+         parentheses the time at {:.0} MHz assuming one instruction per cycle (an estimate: \
+         the M4F needs more than one cycle for loads, branches, divisions and libm calls).\n",
+        rows.iter()
+            .map(|r| format!(
+                "K={}: {} votes, {} rotations, {} no-returns",
+                r.rot_bins, r.vote.count, r.rotation.count, r.no_return.count
+            ))
+            .collect::<Vec<_>>()
+            .join("; "),
+        MCU_HZ / 1e6
+    ));
+    s
+}
+
+/// `activesense mcu-bench`.
+pub fn cmd_mcu_bench(a: McuBenchArgs) -> Result<()> {
+    let t0 = Instant::now();
+    let rows = mcu_bench(&a)?;
+    println!(
+        "firmware {} under qemu-system-arm -M netduinoplus2 -icount shift=0 (1 TIM2 tick = 1 \
+         guest instruction), agent {:?}, termination {:?}, plan seeds {}..{}, episode seed {}\n",
+        a.elf.display(),
+        a.agent,
+        a.termination,
+        a.first_seed,
+        a.first_seed.wrapping_add(a.episodes),
+        a.episode_seed
+    );
+    print!("{}", mcu_bench_table(&rows));
+    eprintln!("mcu-bench: {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
 }

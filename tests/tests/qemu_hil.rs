@@ -21,3 +21,36 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
     assert!(out.contains("core initialised"), "{out}");
     assert!(out.contains("activesense-firmware: shutdown"), "{out}");
 }
+
+/// `mcu-bench`: under `-icount shift=0` the firmware's TIM2 counts executed instructions,
+/// so two runs give identical counts, every update is booked under its kind, and the
+/// work is ordered as it must be (rotation < K = 1 vote < K = 10 vote).
+#[test]
+fn qemu_instruction_counts_reproducible() {
+    use activesense_sim::plans::TEST_SEEDS;
+    use activesense_sim::remote::{mcu_bench, McuBenchArgs};
+    let args = McuBenchArgs {
+        elf: firmware_elf(),
+        episodes: 2,
+        first_seed: TEST_SEEDS.start,
+        agent: activesense_core::agents::AgentKind::Heuristic1,
+        episode_seed: 0,
+        termination: activesense_core::pipeline::Termination::Oracle,
+        timeout_ms: 20_000,
+    };
+    let a = mcu_bench(&args).expect("first run");
+    let b = mcu_bench(&args).expect("second run");
+    assert_eq!(
+        format!("{a:?}"),
+        format!("{b:?}"),
+        "counts must be reproducible"
+    );
+    let (k1, k10) = (&a[0], &a[1]);
+    assert_eq!((k1.rot_bins, k10.rot_bins), (1, 10));
+    for r in [k1, k10] {
+        assert!(r.vote.count > 0 && r.rotation.count > 0, "{r:?}");
+        assert!(r.finish.count == 2 && r.finish.max > r.vote.max, "{r:?}");
+        assert!(r.rotation.max < r.vote.mean() as u64, "{r:?}");
+    }
+    assert!(k10.vote.mean() > 5.0 * k1.vote.mean(), "{k1:?} {k10:?}");
+}

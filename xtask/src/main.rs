@@ -7,9 +7,12 @@
 //! cargo xtask setup        # only the installs: thumbv7em-none-eabihf target, qemu-system-arm
 //! cargo xtask firmware     # build the firmware ELF (profile `firmware`)
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
+//! cargo xtask mcu-bench [--episodes N]  # instructions per update / registration (QEMU -icount)
+//! cargo xtask qemu-log     # the firmware's defmt log (smoke boot + one session), decoded
 //! ```
 
 mod fuzz;
+mod qemu_log;
 mod size;
 
 use anyhow::{bail, Context, Result};
@@ -32,6 +35,8 @@ fn main() {
         Some("qemu-smoke") => qemu_smoke(),
         Some("size") => build_firmware().and_then(|elf| size::report(&elf)),
         Some("fuzz") => fuzz::run(&args[1..]),
+        Some("mcu-bench") => mcu_bench(&args[1..]),
+        Some("qemu-log") => qemu_log::run_task(),
         Some("help") | Some("--help") | Some("-h") | None => {
             print_help();
             Ok(())
@@ -55,8 +60,12 @@ fn print_help() {
          setup       install the thumbv7em-none-eabihf target and qemu-system-arm if missing\n  \
          firmware    build the firmware ELF and print its path\n  \
          qemu-smoke  boot the firmware under qemu-system-arm -M netduinoplus2 and check its boot line\n  \
+         qemu-log    decode the firmware's defmt log (smoke boot and one short session)\n  \
          size        firmware flash / static RAM against the budgets (512 KiB / 96 KiB)\n  \
-         fuzz [SECS] run the cargo-fuzz target `session` for SECS seconds (default 60)"
+         fuzz [SECS] run the cargo-fuzz target `session` for SECS seconds (default 60)\n  \
+         mcu-bench [--episodes N]\n              \
+         instructions per GHT update, rotation and registration on the Cortex-M4 under\n              \
+         QEMU -icount shift=0, K = 1 and K = 10, N episodes each (default 20)"
     );
 }
 
@@ -193,7 +202,11 @@ fn qemu_smoke() -> Result<()> {
     let out = child.wait_with_output()?;
     let stdout = String::from_utf8_lossy(&out.stdout);
     print!("{stdout}");
-    eprint!("{}", String::from_utf8_lossy(&out.stderr));
+    // stderr carries the firmware's binary defmt frames (and QEMU's own diagnostics).
+    match qemu_log::decode(&elf, &out.stderr) {
+        Ok(lines) => lines.iter().for_each(|l| println!("defmt: {l}")),
+        Err(_) => eprint!("{}", String::from_utf8_lossy(&out.stderr)),
+    }
     if !status.success() {
         bail!("firmware exited with {status}");
     }
@@ -202,6 +215,44 @@ fn qemu_smoke() -> Result<()> {
     }
     println!("qemu-smoke: ok ({:.1} s)", started.elapsed().as_secs_f32());
     Ok(())
+}
+
+/// `cargo xtask mcu-bench [--episodes N]`: builds the firmware and runs N simulated
+/// episodes per rotation-bin setting against it under `qemu-system-arm -icount shift=0`
+/// (`activesense mcu-bench`, which prints the markdown table). Deterministic: the same
+/// command gives the same numbers.
+fn mcu_bench(args: &[String]) -> Result<()> {
+    let mut episodes = 20u32;
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--episodes" => {
+                episodes = it
+                    .next()
+                    .context("--episodes needs a number")?
+                    .parse()
+                    .context("--episodes needs a number")?
+            }
+            other => bail!("mcu-bench: unknown argument '{other}'"),
+        }
+    }
+    setup()?;
+    let elf = build_firmware()?;
+    run(cargo()
+        .args([
+            "run",
+            "--quiet",
+            "-p",
+            "activesense-sim",
+            "--bin",
+            "activesense",
+            "--",
+            "mcu-bench",
+            "--episodes",
+            &episodes.to_string(),
+            "--elf",
+        ])
+        .arg(&elf))
 }
 
 /// The whole test suite: installs, formatting, the MCU build of the core, the firmware under
@@ -231,10 +282,26 @@ fn ci() -> Result<()> {
         "-D",
         "warnings",
     ]))?;
+    // The hardware variant (defmt over RTT) must keep compiling too.
+    run(cargo().args([
+        "clippy",
+        "-p",
+        "activesense-firmware",
+        "--target",
+        TARGET,
+        "--no-default-features",
+        "--features",
+        "log-rtt",
+        "--",
+        "-D",
+        "warnings",
+    ]))?;
     run(cargo().args(["build", "-p", "activesense-core", "--target", TARGET]))?;
     qemu_smoke()?;
     let (passed, failed, ignored) =
         test_counted(cargo().args(["test", "--workspace", "--exclude", "activesense-firmware"]))?;
+    // The defmt log decodes on the host (smoke boot and one session).
+    qemu_log::run_task()?;
     println!("xtask ci: all green in {:.0} s", t0.elapsed().as_secs_f32());
     // The plain closing line CI readers look for.
     println!("ci: {passed} passed, {failed} failed, {ignored} skipped");
