@@ -38,7 +38,7 @@ pub const MAX_FRAME: usize = MAX_PAYLOAD + MAX_PAYLOAD / 254 + 2;
 /// exceeds [`MAX_PAYLOAD`] and is answered with `Oversized`.
 pub const MAX_WIRE_VERTICES: usize = 120;
 /// Largest rotation-bin count an episode may ask for.
-pub const MAX_ROT_BINS: u8 = 72;
+pub const MAX_ROT_BINS: u8 = crate::localization::MAX_ROT_BINS as u8;
 /// Largest action limit an episode may ask for (the training limit, §4.2).
 pub const MAX_EPISODE_ACTIONS: u16 = crate::episode::TRAIN_MAX_ACTIONS;
 
