@@ -177,38 +177,42 @@ pub fn qemu_command(elf: &Path) -> Command {
     c
 }
 
-/// Boots the firmware, waits (bounded) for it to exit, and checks the boot line and status.
-fn qemu_smoke() -> Result<()> {
-    setup()?;
-    let elf = build_firmware()?;
-    let mut cmd = qemu_command(&elf);
-    // `smoke`: the firmware exits after its boot line instead of serving USART1.
+/// Boots `elf` under QEMU in smoke mode (the firmware exits after its boot line instead of
+/// serving USART1) and waits, bounded, for it to exit. Returns its captured output: stdout is
+/// the plain console, stderr the binary defmt frames (and QEMU's own diagnostics).
+pub fn smoke_boot(elf: &Path) -> Result<std::process::Output> {
+    let mut cmd = qemu_command(elf);
     cmd.args(["-serial", "null", "-append", "smoke"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     eprintln!("xtask: running {cmd:?}");
     let mut child = cmd.spawn().context("cannot start qemu-system-arm")?;
     let started = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait()? {
-            break s;
-        }
+    // The smoke boot writes a few hundred bytes: the pipes cannot fill up meanwhile.
+    while child.try_wait()?.is_none() {
         if started.elapsed() > Duration::from_secs(60) {
             let _ = child.kill();
             bail!("firmware did not exit within 60 s under QEMU");
         }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let out = child.wait_with_output()?;
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(child.wait_with_output()?)
+}
+
+/// Boots the firmware, waits (bounded) for it to exit, and checks the boot line and status.
+fn qemu_smoke() -> Result<()> {
+    setup()?;
+    let elf = build_firmware()?;
+    let started = Instant::now();
+    let out = smoke_boot(&elf)?;
     let stdout = String::from_utf8_lossy(&out.stdout);
     print!("{stdout}");
-    // stderr carries the firmware's binary defmt frames (and QEMU's own diagnostics).
     match qemu_log::decode(&elf, &out.stderr) {
         Ok(lines) => lines.iter().for_each(|l| println!("defmt: {l}")),
         Err(_) => eprint!("{}", String::from_utf8_lossy(&out.stderr)),
     }
-    if !status.success() {
-        bail!("firmware exited with {status}");
+    if !out.status.success() {
+        bail!("firmware exited with {}", out.status);
     }
     if !stdout.contains(SMOKE_LINE) {
         bail!("firmware did not print '{SMOKE_LINE}'");

@@ -10,12 +10,10 @@
 //! and decodes both defmt streams with `defmt-decoder` against the ELF's `.defmt` table,
 //! printing one readable line per log frame.
 
-use crate::{build_firmware, cargo, qemu_command, root, run, setup};
+use crate::{build_firmware, cargo, root, run, setup, smoke_boot};
 use anyhow::{bail, Context, Result};
 use defmt_decoder::{DecodeError, Table};
 use std::path::Path;
-use std::process::Stdio;
-use std::time::{Duration, Instant};
 
 /// Decodes a defmt byte stream; returns the readable lines.
 pub fn decode(elf: &Path, bytes: &[u8]) -> Result<Vec<String>> {
@@ -61,22 +59,7 @@ pub fn run_task() -> Result<()> {
     let elf = build_firmware()?;
 
     // 1. Smoke boot.
-    let mut cmd = qemu_command(&elf);
-    cmd.args(["-serial", "null", "-append", "smoke"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
-    eprintln!("xtask: running {cmd:?}");
-    let mut child = cmd.spawn().context("cannot start qemu-system-arm")?;
-    let started = Instant::now();
-    // The smoke boot writes a few hundred bytes: the pipes cannot fill up meanwhile.
-    while child.try_wait()?.is_none() {
-        if started.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            bail!("firmware did not exit within 60 s under QEMU");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let out = child.wait_with_output()?;
+    let out = smoke_boot(&elf)?;
     if !out.status.success() {
         bail!("firmware exited with {}", out.status);
     }
