@@ -83,6 +83,22 @@ fn cargo() -> Command {
     c
 }
 
+/// `cargo run --quiet -p activesense-sim --bin activesense --`: the host CLI, for tasks that
+/// drive the firmware through it.
+pub fn activesense_cli() -> Command {
+    let mut c = cargo();
+    c.args([
+        "run",
+        "--quiet",
+        "-p",
+        "activesense-sim",
+        "--bin",
+        "activesense",
+        "--",
+    ]);
+    c
+}
+
 fn run(cmd: &mut Command) -> Result<()> {
     eprintln!("xtask: running {cmd:?}");
     let status = cmd
@@ -242,20 +258,8 @@ fn mcu_bench(args: &[String]) -> Result<()> {
     }
     setup()?;
     let elf = build_firmware()?;
-    run(cargo()
-        .args([
-            "run",
-            "--quiet",
-            "-p",
-            "activesense-sim",
-            "--bin",
-            "activesense",
-            "--",
-            "mcu-bench",
-            "--episodes",
-            &episodes.to_string(),
-            "--elf",
-        ])
+    run(activesense_cli()
+        .args(["mcu-bench", "--episodes", &episodes.to_string(), "--elf"])
         .arg(&elf))
 }
 

@@ -10,7 +10,7 @@
 //! and decodes both defmt streams with `defmt-decoder` against the ELF's `.defmt` table,
 //! printing one readable line per log frame.
 
-use crate::{build_firmware, cargo, root, run, setup, smoke_boot};
+use crate::{activesense_cli, build_firmware, root, run, setup, smoke_boot};
 use anyhow::{bail, Context, Result};
 use defmt_decoder::{DecodeError, Table};
 use std::path::Path;
@@ -69,22 +69,8 @@ pub fn run_task() -> Result<()> {
 
     // 2. One short session through the host simulator.
     let log = root().join("target").join("qemu-log-session.defmt");
-    run(cargo()
-        .args([
-            "run",
-            "--quiet",
-            "-p",
-            "activesense-sim",
-            "--bin",
-            "activesense",
-            "--",
-            "sim",
-            "--episodes",
-            "1",
-            "--rot-bins",
-            "1",
-            "--link",
-        ])
+    run(activesense_cli()
+        .args(["sim", "--episodes", "1", "--rot-bins", "1", "--link"])
         .arg(format!("qemu:{}", elf.display()))
         .arg("--defmt-out")
         .arg(&log))?;
