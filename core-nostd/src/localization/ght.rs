@@ -310,6 +310,25 @@ impl GhtLocalizer {
         (lo as u8, hi as u8)
     }
 
+    /// Algorithms 1–2 for rotation bin `j`, accumulator slot `s`: fills the scratch layer
+    /// with the measurement's max-combined votes and returns their number.
+    fn vote_slot(&mut self, j: usize, s: usize, bearing: f32, range: f32) -> u32 {
+        let l = self.grid.layer_len();
+        let subs = self.slot_subs(s);
+        vote_layer(
+            &self.grid,
+            &self.cfg,
+            &self.rtable,
+            &self.interior,
+            &self.kernel,
+            &mut self.scratch[..l],
+            j as u8,
+            subs,
+            bearing,
+            range,
+        )
+    }
+
     /// Commits one measurement (encoder bearing `β` rad, range `r` m). A no-return must not
     /// be passed (it carries no range).
     pub fn update(&mut self, bearing: f32, range: f32) -> Result<VoteStats, LocError> {
@@ -328,19 +347,7 @@ impl GhtLocalizer {
         let mut added = 0u32;
         for j in 0..self.grid.rot_bins as usize {
             for s in 0..slots {
-                let subs = self.slot_subs(s);
-                stats.votes += vote_layer(
-                    &self.grid,
-                    &self.cfg,
-                    &self.rtable,
-                    &self.interior,
-                    &self.kernel,
-                    &mut self.scratch[..l],
-                    j as u8,
-                    subs,
-                    bearing,
-                    range,
-                );
+                stats.votes += self.vote_slot(j, s, bearing, range);
                 let o = (j * TRACKED_SUB_BINS + s) * l;
                 for (a, &v) in self.acc[o..o + l].iter_mut().zip(&self.scratch[..l]) {
                     *a += v;
@@ -371,19 +378,7 @@ impl GhtLocalizer {
         for j in 0..self.grid.rot_bins as usize {
             self.staged[..l].fill(0);
             for s in 0..slots {
-                let subs = self.slot_subs(s);
-                stats.votes += vote_layer(
-                    &self.grid,
-                    &self.cfg,
-                    &self.rtable,
-                    &self.interior,
-                    &self.kernel,
-                    &mut self.scratch[..l],
-                    j as u8,
-                    subs,
-                    bearing,
-                    range,
-                );
+                stats.votes += self.vote_slot(j, s, bearing, range);
                 let o = (j * TRACKED_SUB_BINS + s) * l;
                 for ((m, &a), &v) in self.staged[..l]
                     .iter_mut()
