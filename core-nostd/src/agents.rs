@@ -92,6 +92,9 @@ pub enum AgentKind {
     Heuristic2,
     /// Left rotations, a measurement every 54th action.
     Heuristic3,
+    /// The learnt actor-critic policy (§3.1); not a Table-3 baseline, so not in
+    /// [`AgentKind::ALL`]. The host runs it from a policy file.
+    Learnt,
 }
 
 impl AgentKind {
@@ -116,12 +119,22 @@ impl AgentKind {
             AgentKind::Heuristic1 => "heuristic-1",
             AgentKind::Heuristic2 => "heuristic-2",
             AgentKind::Heuristic3 => "heuristic-3",
+            AgentKind::Learnt => "learnt",
         }
     }
 
-    /// Parses a paper name.
+    /// True for the seven Table-3 baselines (which [`BaselineAgent`] plays).
+    pub fn is_baseline(self) -> bool {
+        self != AgentKind::Learnt
+    }
+
+    /// Parses a paper name (`learnt` included).
     pub fn from_name(s: &str) -> Option<AgentKind> {
-        AgentKind::ALL.iter().copied().find(|a| a.name() == s)
+        AgentKind::ALL
+            .iter()
+            .copied()
+            .chain([AgentKind::Learnt])
+            .find(|a| a.name() == s)
     }
 
     /// Stable small integer id (wire protocol).
@@ -131,7 +144,10 @@ impl AgentKind {
 
     /// Inverse of [`AgentKind::id`].
     pub fn from_id(id: u8) -> Option<AgentKind> {
-        AgentKind::ALL.get(id as usize).copied()
+        match id {
+            7 => Some(AgentKind::Learnt),
+            _ => AgentKind::ALL.get(id as usize).copied(),
+        }
     }
 
     /// Period k of the "measure every k-th action" heuristics.
@@ -227,6 +243,11 @@ mod tests {
             assert_eq!(AgentKind::from_id(k.id()), Some(k));
         }
         assert_eq!(AgentKind::from_name("heuristic-9"), None);
+        assert_eq!(AgentKind::from_name("learnt"), Some(AgentKind::Learnt));
+        assert_eq!(
+            AgentKind::from_id(AgentKind::Learnt.id()),
+            Some(AgentKind::Learnt)
+        );
     }
 
     #[test]

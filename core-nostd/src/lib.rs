@@ -24,6 +24,8 @@
 //! | [`symmetry`] | 3.4 (edge-chain rotational-symmetry detection, Wolter et al. 1985) |
 //! | [`pose_distance`] | 3.4 (symmetry-aware pose distance, Table 2, equations 7–10) |
 //! | [`pipeline`] | Fig. 1, 3.1–3.3 (one episode's chain: localize, terminate, refine) |
+//! | [`policy`] | 3.1, Fig. 2 (the policy seam: `PolicyInput`, state features, `Policy`) |
+//! | [`runner`] | Fig. 1 (the one episode loop every side drives: `EpisodeRunner`) |
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -36,8 +38,10 @@ pub mod instrument;
 pub mod localization;
 pub mod math;
 pub mod pipeline;
+pub mod policy;
 pub mod pose_distance;
 pub mod registration;
+pub mod runner;
 pub mod session;
 pub mod symmetry;
 pub mod wire;

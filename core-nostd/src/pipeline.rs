@@ -206,7 +206,7 @@ impl Pipeline {
             return false;
         }
         self.voted = true;
-        // Capacity (128) exceeds any action limit the protocol accepts.
+        // Capacity = the protocol's action limit (asserted at compile time in `runner`).
         let _ = self.observations.push(Measurement::new(bearing, range));
         true
     }

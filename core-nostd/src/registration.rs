@@ -77,7 +77,7 @@
 //! [`AnnealParams::min_error`], or after [`AnnealParams::max_rounds`]. Gaussian noise comes
 //! from a seeded [`Pcg32`] through Box–Muller in f32 (libm), so a seed fixes the result
 //! bit for bit on host and MCU. Nothing is allocated; the per-call scratch is a few KiB of
-//! stack ([`MAX_OBSERVATIONS`] pairs).
+//! stack ([`MAX_OBSERVATIONS`] pairs, ≈ 14 KiB at 500).
 
 use crate::floorplan::{closest_on_segment, FloorPlan};
 use crate::geometry::{length, rotate, unit, v2, Pose2, Vec2};
@@ -87,8 +87,10 @@ use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg32;
 use serde::{Deserialize, Serialize};
 
-/// Fixed capacity of an observation set.
-pub const MAX_OBSERVATIONS: usize = 128;
+/// Fixed capacity of an observation set: every measurement of the longest episode the
+/// protocol accepts ([`crate::wire::MAX_EPISODE_ACTIONS`] actions, all of them measurements
+/// at worst), so no reading is ever dropped (checked at compile time in [`crate::runner`]).
+pub const MAX_OBSERVATIONS: usize = crate::episode::TRAIN_MAX_ACTIONS as usize;
 
 /// Longest accepted range (m); far beyond any EDM and any valid plan.
 pub const MAX_RANGE: f32 = 1000.0;

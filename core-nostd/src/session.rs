@@ -20,38 +20,28 @@
 //! Nothing here panics on input or blocks except on the link itself.
 //!
 //! **Memory.** [`Session::new`] is a `const fn`, so the firmware places the whole state
-//! (≈ 7 KiB: frame buffer, plan, measurement log) in a `static`.
+//! (frame buffers, plan, and the episode runner with its localizer) in a `static`.
 //!
-//! **Decisions.** The controller drives a [`Pipeline`] (the same one the host simulator
-//! runs): every returned range is voted into the GHT localizer in [`Controller::observe`];
+//! **Decisions.** The controller drives an [`EpisodeRunner`] (the same loop the host
+//! simulator, the evaluation and the trainer run): every returned range is voted into the GHT localizer in [`Controller::observe`];
 //! [`Controller::next_step`] ends the episode with [`EpisodeEnd::Localized`] when the
 //! termination rule fires, and at the end of every episode reports the coarse (belief
 //! argmax) and refined (sparse registration) AgentPoses.
 
 use crate::agents::{Action, BaselineAgent};
-use crate::episode::{EpisodeConfig, EpisodeState, Observation, SCAN_PIXELS};
+use crate::episode::{EpisodeConfig, Observation, SCAN_PIXELS};
 use crate::floorplan::{FloorPlan, PlanError, MAX_VERTICES};
 use crate::geometry::v2;
-use crate::pipeline::{registration_seed, Pipeline, PipelineError, PipelineParams};
+use crate::pipeline::{registration_seed, PipelineError, PipelineParams};
+use crate::runner::{Booked, EpisodeRunner};
 use crate::wire::*;
 use embedded_io::{Read, Write};
 use heapless::{String as HString, Vec as HVec};
 
-/// Measurements kept per episode (registration input); the action limit bounds it.
-pub const MAX_MEASUREMENTS: usize = MAX_EPISODE_ACTIONS as usize;
 /// Largest encoded reply frame.
 pub const MAX_REPLY: usize = 256;
 /// Default silence after which a running episode is abandoned (ms).
 pub const DEFAULT_TIMEOUT_MS: u32 = 10_000;
-
-/// One range measurement in the scene frame.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Measurement {
-    /// Encoder bearing β (rad, scene frame).
-    pub bearing: f32,
-    /// Range (m).
-    pub range: f32,
-}
 
 /// What the controller wants next.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,36 +58,22 @@ pub enum Step {
 }
 
 struct Running {
-    params: EpisodeParams,
-    state: EpisodeState,
     agent: BaselineAgent,
     pending: Option<Action>,
-    no_returns: u16,
-    last_scan: u32,
     trace: TraceHash,
     cycles: EpisodeCycles,
     update_start: u32,
     /// What the update being timed did (set by `observe`).
-    update_kind: UpdateKind,
-    stop: bool,
-}
-
-/// What an observed action did to the device's state (for the cycle statistics).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum UpdateKind {
-    Vote,
-    Rotation,
-    NoReturn,
+    update_kind: Booked,
 }
 
 /// The device's decision maker for one plan and one episode at a time.
 pub struct Controller {
     plan: Option<FloorPlan>,
     running: Option<Running>,
-    measurements: HVec<Measurement, MAX_MEASUREMENTS>,
     cycles: UpdateStats,
     clock: Option<fn() -> u32>,
-    pipeline: Pipeline,
+    runner: EpisodeRunner,
 }
 
 impl Controller {
@@ -107,14 +83,13 @@ impl Controller {
         Controller {
             plan: None,
             running: None,
-            measurements: HVec::new(),
             cycles: UpdateStats {
                 updates: 0,
                 total_cycles: 0,
                 max_cycles: 0,
             },
             clock,
-            pipeline: Pipeline::new_empty(),
+            runner: EpisodeRunner::new_empty(),
         }
     }
 
@@ -137,7 +112,6 @@ impl Controller {
     pub fn reset(&mut self) {
         self.plan = None;
         self.running = None;
-        self.measurements.clear();
         self.cycles = UpdateStats::default();
     }
 
@@ -148,13 +122,18 @@ impl Controller {
 
     /// Actions taken in the running episode.
     pub fn episode_actions(&self) -> u16 {
-        self.running.as_ref().map(|r| r.state.actions).unwrap_or(0)
+        self.running
+            .as_ref()
+            .map(|_| self.runner.state().actions)
+            .unwrap_or(0)
     }
 
     /// The latest topological scan of the running episode (the initial one before the
     /// first observation).
     pub fn last_scan(&self) -> Option<u32> {
-        self.running.as_ref().map(|r| r.last_scan)
+        self.running
+            .as_ref()
+            .and_then(|_| self.runner.history().scan(0))
     }
 
     /// Cycle statistics since power-on / reset.
@@ -162,9 +141,10 @@ impl Controller {
         self.cycles
     }
 
-    /// The measurements of the running (or last) episode, scene frame.
-    pub fn measurements(&self) -> &[Measurement] {
-        &self.measurements
+    /// Ranges voted in the running (or last) episode; the registration keeps every one
+    /// of them.
+    pub fn measurement_count(&self) -> usize {
+        self.runner.pipeline().observations().len()
     }
 
     /// Validates `p` against the loaded plan.
@@ -179,6 +159,9 @@ impl Controller {
         }
         if p.rot_bins == 0 || p.rot_bins > MAX_ROT_BINS {
             return bad(ParamError::RotBins);
+        }
+        if !p.agent.is_baseline() {
+            return bad(ParamError::AgentUnavailable);
         }
         if let Some(h) = p.known_heading {
             if !h.is_finite() {
@@ -214,41 +197,38 @@ impl Controller {
             termination: p.termination,
             registration_seed: registration_seed(p.seed),
         };
-        self.pipeline.start(plan, &pp).map_err(|e| {
-            WireError::InvalidParams(match e {
-                PipelineError::KnownHeadingRequired => ParamError::KnownHeadingRequired,
-                PipelineError::GroundTruthRequired => ParamError::GroundTruthRequired,
-                PipelineError::Localizer(_) => ParamError::PlanNotLocalizable,
-            })
-        })?;
-        self.measurements.clear();
+        self.running = None;
+        self.runner
+            .start(plan, &pp, config, p.initial_scan)
+            .map_err(|e| {
+                WireError::InvalidParams(match e {
+                    PipelineError::KnownHeadingRequired => ParamError::KnownHeadingRequired,
+                    PipelineError::GroundTruthRequired => ParamError::GroundTruthRequired,
+                    PipelineError::Localizer(_) => ParamError::PlanNotLocalizable,
+                })
+            })?;
         self.running = Some(Running {
-            params: *p,
-            state: EpisodeState::new(config),
             agent: BaselineAgent::new(p.agent, p.seed),
             pending: None,
-            no_returns: 0,
-            // The scan is not used by the baseline agents; the learnt policy will read it.
-            last_scan: p.initial_scan,
             trace: TraceHash::new(),
             cycles: EpisodeCycles::default(),
             update_start: self.now(),
-            update_kind: UpdateKind::Rotation,
-            stop: false,
+            update_kind: Booked::Rotation,
         });
         Ok(())
     }
 
-    fn report(r: &Running, end: EpisodeEnd) -> EpisodeReport {
+    fn report(runner: &EpisodeRunner, r: &Running, end: EpisodeEnd) -> EpisodeReport {
+        let state = runner.state();
         EpisodeReport {
             recognised: None,
             end,
-            actions: r.state.actions,
-            measurements: r.state.measurements,
-            rotations: r.state.rotations,
-            no_returns: r.no_returns,
-            cost: r.state.cost,
-            bearing_index: r.state.bearing_index,
+            actions: state.actions,
+            measurements: state.measurements,
+            rotations: state.rotations,
+            no_returns: runner.no_returns(),
+            cost: state.cost,
+            bearing_index: state.bearing_index,
             trace_hash: r.trace.value(),
             coarse: None,
             refined: None,
@@ -262,50 +242,47 @@ impl Controller {
     /// **Timing.** One update spans from the start of [`Controller::observe`] to the end
     /// of the decision here (booking the observation, the GHT vote and termination check
     /// for a returned range, choosing the next action); the end-of-episode chain
-    /// ([`Pipeline::finish`]: coarse read-out, registration, recognition) is timed
-    /// separately into [`EpisodeCycles::finish`].
+    /// ([`Pipeline::finish`](crate::pipeline::Pipeline::finish): coarse read-out,
+    /// registration, recognition) is timed separately into [`EpisodeCycles::finish`].
     pub fn next_step(&mut self) -> Option<Step> {
         let clock = self.clock;
         let now = || clock.map(|c| c()).unwrap_or(0);
         let r = self.running.as_mut()?;
         if let Some(action) = r.pending {
             return Some(Step::Act {
-                step: r.state.actions,
+                step: self.runner.state().actions,
                 action,
             });
         }
-        let step = if r.stop || r.state.exhausted() {
-            None
-        } else {
-            let action = r.agent.next_action();
+        let step = self.runner.decide(&mut r.agent).map(|action| {
             r.pending = Some(action);
-            Some(Step::Act {
-                step: r.state.actions,
+            Step::Act {
+                step: self.runner.state().actions,
                 action,
-            })
-        };
+            }
+        });
         let cycles = now().wrapping_sub(r.update_start);
-        if r.state.actions > 0 {
+        if self.runner.state().actions > 0 {
             match r.update_kind {
-                UpdateKind::Vote => r.cycles.vote.record(cycles),
-                UpdateKind::Rotation => r.cycles.rotation.record(cycles),
-                UpdateKind::NoReturn => r.cycles.no_return.record(cycles),
+                Booked::Vote => r.cycles.vote.record(cycles),
+                Booked::Rotation => r.cycles.rotation.record(cycles),
+                Booked::NoReturn => r.cycles.no_return.record(cycles),
             }
             self.cycles.record(cycles);
         }
         match step {
             Some(s) => Some(s),
             None => {
-                let end = if r.stop {
+                let end = if self.runner.stop().is_some() {
                     EpisodeEnd::Localized
                 } else {
                     EpisodeEnd::ActionLimit
                 };
-                let mut rep = Self::report(r, end);
+                let mut rep = Self::report(&self.runner, r, end);
                 self.running = None;
                 if let Some(plan) = self.plan.as_ref() {
                     let t0 = now();
-                    let result = self.pipeline.finish(plan);
+                    let result = self.runner.finish(plan);
                     rep.cycles.finish = now().wrapping_sub(t0);
                     rep.coarse = result.coarse;
                     rep.refined = result.refined.map(|x| x.pose);
@@ -321,60 +298,27 @@ impl Controller {
         let now = self.now();
         let r = self.running.as_mut().ok_or(WireError::UnexpectedRequest)?;
         let action = match r.pending {
-            Some(a) if step == r.state.actions => a,
+            Some(a) if step == self.runner.state().actions => a,
             _ => {
                 return Err(WireError::StepMismatch {
-                    expected: r.state.actions,
+                    expected: self.runner.state().actions,
                 })
             }
         };
-        let bad = |e| Err(WireError::InvalidObservation(e));
-        if obs.scan >> SCAN_PIXELS != 0 {
-            return bad(ObservationError::ScanBits);
-        }
-        if let Some(range) = obs.range {
-            if action != Action::Measure {
-                return bad(ObservationError::RangeOnRotation);
-            }
-            if !range.is_finite() {
-                return bad(ObservationError::NonFiniteRange);
-            }
-            if range < 0.0 {
-                return bad(ObservationError::NegativeRange);
-            }
-        }
+        r.update_kind = self
+            .runner
+            .observe(action, obs)
+            .map_err(WireError::InvalidObservation)?;
         r.update_start = now;
         r.pending = None;
-        r.state.apply(action);
         r.trace.push(action, obs);
-        r.last_scan = obs.scan;
-        r.update_kind = match (action, obs.range) {
-            (Action::Measure, Some(_)) => UpdateKind::Vote,
-            (Action::Measure, None) => UpdateKind::NoReturn,
-            _ => UpdateKind::Rotation,
-        };
-        if action == Action::Measure {
-            match obs.range {
-                Some(range) => {
-                    // Capacity = action limit maximum, so this cannot overflow.
-                    let _ = self.measurements.push(Measurement {
-                        bearing: r.state.bearing(),
-                        range,
-                    });
-                    self.pipeline.measure(r.state.bearing(), range);
-                    r.stop = self.pipeline.should_stop().is_some();
-                }
-                None => r.no_returns = r.no_returns.saturating_add(1),
-            }
-        }
-        let _ = &r.params;
         Ok(())
     }
 
     /// Aborts the running episode, returning its report so far.
     pub fn abort(&mut self) -> Option<EpisodeReport> {
         let r = self.running.take()?;
-        Some(Self::report(&r, EpisodeEnd::Aborted))
+        Some(Self::report(&self.runner, &r, EpisodeEnd::Aborted))
     }
 }
 
@@ -958,7 +902,7 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
-        assert_eq!(s.controller().measurements().len(), 2);
+        assert_eq!(s.controller().measurement_count(), 2);
         // The event queue keeps the latest MAX_EVENTS: start, rejected step, end.
         let events: Vec<_> = core::iter::from_fn(|| s.take_event()).collect();
         assert!(matches!(

@@ -359,6 +359,9 @@ pub enum ParamError {
     /// The localizer cannot take this plan (not centred on its perimeter centroid, or
     /// more perimeter than its R-table holds).
     PlanNotLocalizable,
+    /// The requested agent does not run on this device (the learnt policy, until the
+    /// device carries one).
+    AgentUnavailable,
 }
 
 /// Why an observation was rejected (the episode stays at the same step).

@@ -18,9 +18,11 @@ use crate::world::{Placement, SimWorld};
 use activesense_core::agents::{Action, AgentKind, BaselineAgent};
 use activesense_core::episode::{EpisodeConfig, EpisodeState};
 pub use activesense_core::pipeline::Termination;
-use activesense_core::pipeline::{self, Pipeline, PipelineParams, Stop};
+use activesense_core::pipeline::{self, PipelineParams, PipelineResult, Stop};
+use activesense_core::policy::Policy;
 use activesense_core::pose_distance::PoseDistance;
 use activesense_core::registration::Registration;
+use activesense_core::runner::EpisodeRunner;
 use activesense_core::{FloorPlan, Pose2};
 use serde::{Deserialize, Serialize};
 
@@ -177,28 +179,49 @@ pub fn pipeline_params(spec: &EpisodeSpec, truth: &Pose2) -> PipelineParams {
     }
 }
 
-/// Runs one episode to its end, registers, scores and records it.
+/// Runs one episode of a Table-3 baseline (`spec.agent`, seeded from the spec) to its
+/// end, registers, scores and records it. Other agents go through [`run_episode_with`].
 pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
+    let mut agent = BaselineAgent::new(spec.agent, spec.agent_seed());
+    run_episode_with(spec, &mut agent)
+}
+
+/// A simulated room for `spec` and an [`EpisodeRunner`] started in it (the truth is
+/// `world.truth()`) and the initial scan. Shared by [`run_episode_with`] and the trainer.
+pub fn start_episode(spec: &EpisodeSpec, runner: &mut EpisodeRunner) -> (FloorPlan, SimWorld, u32) {
     let plan = plans::generate(spec.plan_seed);
     let mut world = SimWorld::new(plan.clone(), spec.sensor, spec.config, spec.world_seed());
     let truth = world.truth();
-    let mut agent = BaselineAgent::new(spec.agent, spec.agent_seed());
-    let mut state = EpisodeState::new(spec.config);
-    let mut pipe = Box::new(Pipeline::new_empty());
+    let initial_scan = world.scan();
     // Generated plans are valid, centred and within the R-table capacity (tested), and the
     // parameters are complete by construction, so a failure here is a bug, not bad input.
-    pipe.start(&plan, &pipeline_params(spec, &truth))
+    runner
+        .start(
+            &plan,
+            &pipeline_params(spec, &truth),
+            spec.config,
+            initial_scan,
+        )
         .expect("generated plan fits the pipeline");
-    let initial_scan = world.scan();
+    (plan, world, initial_scan)
+}
+
+/// Runs one episode with `policy` choosing the actions: the core [`EpisodeRunner`] loop
+/// (the one the instrument runs) against the simulated room, then registration, scoring
+/// and the trajectory record.
+pub fn run_episode_with(spec: &EpisodeSpec, policy: &mut dyn Policy) -> Trajectory {
+    let mut runner = Box::new(EpisodeRunner::new_empty());
+    let (plan, mut world, initial_scan) = start_episode(spec, &mut runner);
+    let truth = world.truth();
     let mut steps = Vec::with_capacity(spec.config.max_actions as usize);
-    let mut end = EndReason::ActionLimit;
-    while !state.exhausted() {
-        let action = agent.next_action();
-        state.apply(action);
+    while let Some(action) = runner.decide(policy) {
         let (obs, step_truth) = world.act(action);
-        if let Some(range) = obs.range {
-            pipe.measure(state.bearing(), range);
-        }
+        // The simulated sensors only produce valid answers.
+        runner
+            .observe(action, &obs)
+            .expect("simulated observation is valid");
+        let state = runner.state();
+        let pipe = runner.pipeline();
         let loc = pipe.localizer();
         steps.push(StepRecord {
             step: state.actions - 1,
@@ -217,20 +240,32 @@ pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
                 None
             },
         });
-        if action == Action::Measure {
-            if let Some(stop) = pipe.should_stop() {
-                end = match stop {
-                    Stop::CoarseSuccess => EndReason::CoarseSuccess,
-                    Stop::Confident => EndReason::Confident,
-                };
-                break;
-            }
-        }
     }
-    let result = pipe.finish(&plan);
-    let distance = PoseDistance::with_order(&plan, result.symmetry_order);
-    let err = |p: Pose2| distance.agent_distance(&p, &truth);
-    let outcome = Outcome {
+    let end = match runner.stop() {
+        Some(Stop::CoarseSuccess) => EndReason::CoarseSuccess,
+        Some(Stop::Confident) => EndReason::Confident,
+        None => EndReason::ActionLimit,
+    };
+    let result = runner.finish(&plan);
+    let outcome = score(&plan, &truth, &result);
+    Trajectory {
+        spec: spec.clone(),
+        truth,
+        placement: world.placement(),
+        plan,
+        initial_scan,
+        steps,
+        summary: *runner.state(),
+        end,
+        outcome,
+    }
+}
+
+/// Scores a pipeline result against the truth with the symmetry-aware pose distance.
+pub fn score(plan: &FloorPlan, truth: &Pose2, result: &PipelineResult) -> Outcome {
+    let distance = PoseDistance::with_order(plan, result.symmetry_order);
+    let err = |p: Pose2| distance.agent_distance(&p, truth);
+    Outcome {
         recognised: result.recognised.unwrap_or(false),
         symmetry_order: result.symmetry_order,
         coarse: result.coarse,
@@ -246,17 +281,6 @@ pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
                 "no measurement returned: nothing to register".to_string()
             }
         }),
-    };
-    Trajectory {
-        spec: spec.clone(),
-        truth,
-        placement: world.placement(),
-        plan,
-        initial_scan,
-        steps,
-        summary: state,
-        end,
-        outcome,
     }
 }
 
@@ -277,7 +301,11 @@ pub fn parse_termination(s: &str) -> Result<Termination, String> {
 /// Command-line parser for `--agent` (shared by every subcommand).
 pub fn parse_agent(s: &str) -> Result<AgentKind, String> {
     AgentKind::from_name(s).ok_or_else(|| {
-        let names: Vec<_> = AgentKind::ALL.iter().map(|a| a.name()).collect();
+        let names: Vec<_> = AgentKind::ALL
+            .iter()
+            .chain(&[AgentKind::Learnt])
+            .map(|a| a.name())
+            .collect();
         format!(
             "unknown agent '{s}' (expected one of: {})",
             names.join(", ")

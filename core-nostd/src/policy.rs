@@ -1,0 +1,225 @@
+//! The policy seam (paper §3.1, Fig. 2): what a sampling policy sees and how it answers.
+//!
+//! Every agent — the seven Table-3 baselines, the learnt actor-critic on the host, and its
+//! int8 form on the instrument — implements [`Policy`]: it receives a [`PolicyInput`] built
+//! by this module from the episode's own state and returns the next [`Action`]. The state
+//! representation of Fig. 2 is extracted here, once, and nowhere else, so the trainer, the
+//! host evaluation and the firmware feed a network bit-identical inputs:
+//!
+//! - **belief map** ([`PolicyInput::write_belief`]): the GHT belief as the localizer holds
+//!   it, `K × 30 × 30` (`[bin][y][x]`), each cell's probability divided by the largest one,
+//!   so values lie in `[0, 1]` whatever the belief's sharpness (and quantise to int8
+//!   without a per-state scale). Cells outside the room are 0; before the first vote the
+//!   interior is uniformly 1, which shows the network the room's shape.
+//! - **side features** ([`PolicyInput::write_side`], [`SIDE_FEATURES`] values): the last
+//!   [`SCAN_HISTORY`] topological scans (20 pixels each, most recent first), the last
+//!   [`ACTION_HISTORY`] actions one-hot (most recent first; zeros before the episode's
+//!   start), the beam's reference direction `(cos, sin)` of `bearing + heading offset`
+//!   (the model-frame beam direction when the heading is known, K = 1; relative to rotation
+//!   bin 0 otherwise), the step index over [`STEP_SCALE`] and the returned ranges over
+//!   [`MEASUREMENT_SCALE`].
+//!
+//! The features are `f32` computed with plain arithmetic and `libm`, so the host and the
+//! Cortex-M4F compute the same bits.
+
+use crate::agents::{Action, BaselineAgent};
+use crate::episode::SCAN_PIXELS;
+use crate::localization::{GhtLocalizer, MAX_NX, MAX_NY};
+use crate::math::{cos, sin};
+
+/// Side of the belief map the policy sees (cells per axis).
+pub const BELIEF_SIDE: usize = MAX_NX;
+/// Cells in one belief plane.
+pub const BELIEF_PLANE: usize = BELIEF_SIDE * BELIEF_SIDE;
+/// Topological scans the policy remembers.
+pub const SCAN_HISTORY: usize = 4;
+/// Actions the policy remembers (≥ 6, so heuristic-1's period fits in the window).
+pub const ACTION_HISTORY: usize = 8;
+/// Length of the side-feature vector.
+pub const SIDE_FEATURES: usize = SCAN_HISTORY * SCAN_PIXELS + ACTION_HISTORY * 3 + 4;
+/// The step index is divided by this (the evaluation's action limit).
+pub const STEP_SCALE: f32 = 100.0;
+/// The number of returned ranges is divided by this.
+pub const MEASUREMENT_SCALE: f32 = 10.0;
+
+const _: () = assert!(MAX_NX == MAX_NY, "the policy's belief map is square");
+
+/// The recent scans and actions of an episode (fixed size, most recent first).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct History {
+    scans: [u32; SCAN_HISTORY],
+    scans_seen: u8,
+    actions: [Option<Action>; ACTION_HISTORY],
+}
+
+impl History {
+    /// An empty history.
+    pub const fn new() -> Self {
+        History {
+            scans: [0; SCAN_HISTORY],
+            scans_seen: 0,
+            actions: [None; ACTION_HISTORY],
+        }
+    }
+
+    /// Starts an episode with the scan seen before the first action.
+    pub fn start(&mut self, initial_scan: u32) {
+        *self = Self::new();
+        self.push_scan(initial_scan);
+    }
+
+    fn push_scan(&mut self, scan: u32) {
+        self.scans.copy_within(0..SCAN_HISTORY - 1, 1);
+        self.scans[0] = scan;
+        self.scans_seen = self.scans_seen.saturating_add(1);
+    }
+
+    /// Books one action and the scan seen after it.
+    pub fn push(&mut self, action: Action, scan: u32) {
+        self.actions.copy_within(0..ACTION_HISTORY - 1, 1);
+        self.actions[0] = Some(action);
+        self.push_scan(scan);
+    }
+
+    /// Scan `i` steps back (0 = latest); `None` beyond what was seen.
+    pub fn scan(&self, i: usize) -> Option<u32> {
+        (i < SCAN_HISTORY && i < self.scans_seen as usize).then(|| self.scans[i])
+    }
+
+    /// Action `i` steps back (0 = latest).
+    pub fn action(&self, i: usize) -> Option<Action> {
+        self.actions.get(i).copied().flatten()
+    }
+}
+
+impl Default for History {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Everything a policy may look at before choosing an action. Built by
+/// [`crate::runner::EpisodeRunner::input`]; a policy never sees the ground truth.
+#[derive(Clone, Copy)]
+pub struct PolicyInput<'a> {
+    /// The GHT localizer holding the belief.
+    pub localizer: &'a GhtLocalizer,
+    /// Recent scans and actions.
+    pub history: &'a History,
+    /// Actions taken so far (the index of the action being chosen).
+    pub step: u16,
+    /// Ranges voted so far.
+    pub measurements: u16,
+    /// Encoder bearing (rad, scene frame).
+    pub bearing: f32,
+    /// Model-frame heading of encoder bearing 0 when known (K = 1), else 0.
+    pub heading_offset: f32,
+}
+
+impl PolicyInput<'_> {
+    /// Belief planes `K` (the localizer's rotation bins).
+    pub fn belief_planes(&self) -> usize {
+        self.localizer.grid().rot_bins as usize
+    }
+
+    /// Values [`PolicyInput::write_belief`] writes: `K × BELIEF_PLANE`.
+    pub fn belief_len(&self) -> usize {
+        self.belief_planes() * BELIEF_PLANE
+    }
+
+    /// Writes the belief map, `[bin][y][x]` over a `BELIEF_SIDE²` plane (a smaller grid is
+    /// zero-padded), as probability over the largest probability. Returns the values
+    /// written (`belief_len()`), or 0 when `out` is too short or the localizer not ready.
+    pub fn write_belief(&self, out: &mut [f32]) -> usize {
+        let loc = self.localizer;
+        let n = self.belief_len();
+        if !loc.is_ready() || out.len() < n {
+            return 0;
+        }
+        let g = loc.grid();
+        let (nx, ny) = (g.nx as usize, g.ny as usize);
+        let mut peak = 0.0f32;
+        for i in 0..g.len() {
+            peak = peak.max(loc.prob(i));
+        }
+        let scale = if peak > 0.0 { 1.0 / peak } else { 0.0 };
+        out[..n].iter_mut().for_each(|v| *v = 0.0);
+        for bin in 0..g.rot_bins as usize {
+            for y in 0..ny.min(BELIEF_SIDE) {
+                for x in 0..nx.min(BELIEF_SIDE) {
+                    let i = (bin * ny + y) * nx + x;
+                    out[bin * BELIEF_PLANE + y * BELIEF_SIDE + x] = loc.prob(i) * scale;
+                }
+            }
+        }
+        n
+    }
+
+    /// Writes the [`SIDE_FEATURES`] side features (layout in the module doc).
+    pub fn write_side(&self, out: &mut [f32; SIDE_FEATURES]) {
+        let mut k = 0;
+        for s in 0..SCAN_HISTORY {
+            let scan = self.history.scan(s);
+            for p in 0..SCAN_PIXELS {
+                out[k] = match scan {
+                    Some(m) if m & (1 << p) != 0 => 1.0,
+                    _ => 0.0,
+                };
+                k += 1;
+            }
+        }
+        for a in 0..ACTION_HISTORY {
+            let act = self.history.action(a);
+            for (j, want) in [Action::RotateLeft, Action::RotateRight, Action::Measure]
+                .into_iter()
+                .enumerate()
+            {
+                out[k + j] = if act == Some(want) { 1.0 } else { 0.0 };
+            }
+            k += 3;
+        }
+        let beam = self.bearing + self.heading_offset;
+        out[k] = cos(beam);
+        out[k + 1] = sin(beam);
+        out[k + 2] = self.step as f32 / STEP_SCALE;
+        out[k + 3] = self.measurements as f32 / MEASUREMENT_SCALE;
+    }
+}
+
+/// A sampling policy: chooses the next action from what the instrument knows.
+pub trait Policy {
+    /// The next action. Called once per action of the episode, in order.
+    fn act(&mut self, input: &PolicyInput<'_>) -> Action;
+}
+
+/// The Table-3 baselines ignore the state by definition.
+impl Policy for BaselineAgent {
+    fn act(&mut self, _input: &PolicyInput<'_>) -> Action {
+        self.next_action()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn history_keeps_the_most_recent_first() {
+        let mut h = History::new();
+        h.start(0b1);
+        assert_eq!(h.scan(0), Some(1));
+        assert_eq!(h.scan(1), None);
+        assert_eq!(h.action(0), None);
+        h.push(Action::Measure, 0b10);
+        h.push(Action::RotateLeft, 0b100);
+        assert_eq!(h.scan(0), Some(4));
+        assert_eq!(h.scan(2), Some(1));
+        assert_eq!(h.action(0), Some(Action::RotateLeft));
+        assert_eq!(h.action(1), Some(Action::Measure));
+        for _ in 0..20 {
+            h.push(Action::RotateRight, 7);
+        }
+        assert_eq!(h.action(ACTION_HISTORY - 1), Some(Action::RotateRight));
+        assert_eq!(h.scan(SCAN_HISTORY), None);
+    }
+}

@@ -1,0 +1,278 @@
+//! The one episode loop (paper Fig. 1, §3.1): policy → action → observation → localizer →
+//! termination, then refinement. The host simulator, the evaluation harness, the trainer
+//! and the instrument's [`crate::session::Controller`] all drive an [`EpisodeRunner`], so a
+//! policy sees bit-identical [`PolicyInput`]s wherever it runs and an episode takes the
+//! same actions on the host and on the device.
+//!
+//! The runner owns the [`Pipeline`] (GHT localizer, measurement log, stop rule), the
+//! instrument-side [`EpisodeState`] (encoder bearing, counts, cost) and the policy's
+//! [`History`]. It does not own the policy (the device keeps its agent with the protocol
+//! state; the trainer batches many runners through one network) nor the world (the
+//! sensors answer from outside: a simulated room, or the real instrument).
+//!
+//! One step: [`EpisodeRunner::decide`] (or [`EpisodeRunner::input`] and a policy of the
+//! caller's choice), the instrument performs the action, then
+//! [`EpisodeRunner::observe`] validates and books the answer. [`EpisodeRunner::is_over`]
+//! turns true on a stop or at the action limit; [`EpisodeRunner::finish`] registers.
+
+use crate::agents::Action;
+use crate::episode::{EpisodeConfig, EpisodeState, Observation, SCAN_PIXELS};
+use crate::floorplan::FloorPlan;
+use crate::pipeline::{Pipeline, PipelineError, PipelineParams, PipelineResult, Stop};
+use crate::policy::{History, Policy, PolicyInput};
+use crate::registration::MAX_OBSERVATIONS;
+use crate::wire::{ObservationError, MAX_EPISODE_ACTIONS};
+
+// Every measurement of the longest episode reaches the registration: none is dropped.
+const _: () = assert!(MAX_OBSERVATIONS >= MAX_EPISODE_ACTIONS as usize);
+
+/// What booking an observation did to the episode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Booked {
+    /// A rotation.
+    Rotation,
+    /// A measurement that returned a range, voted into the localizer.
+    Vote,
+    /// A measurement without a usable return.
+    NoReturn,
+}
+
+/// Pipeline + episode bookkeeping + policy history of one episode.
+pub struct EpisodeRunner {
+    pipeline: Pipeline,
+    state: EpisodeState,
+    history: History,
+    stop: Option<Stop>,
+    no_returns: u16,
+    heading_offset: f32,
+}
+
+impl Default for EpisodeRunner {
+    fn default() -> Self {
+        Self::new_empty()
+    }
+}
+
+impl EpisodeRunner {
+    /// An idle runner (for a `static`; ≈ the localizer's size).
+    pub const fn new_empty() -> Self {
+        EpisodeRunner {
+            pipeline: Pipeline::new_empty(),
+            state: EpisodeState {
+                config: EpisodeConfig {
+                    steps_per_turn: crate::episode::DEFAULT_STEPS_PER_TURN,
+                    max_actions: crate::episode::EVAL_MAX_ACTIONS,
+                    costs: crate::agents::ActionCosts {
+                        rotate: 0.005,
+                        measure: 0.05,
+                    },
+                },
+                bearing_index: 0,
+                actions: 0,
+                measurements: 0,
+                rotations: 0,
+                cost: 0.0,
+            },
+            history: History::new(),
+            stop: None,
+            no_returns: 0,
+            heading_offset: 0.0,
+        }
+    }
+
+    /// Starts an episode on the centred `plan`; `initial_scan` is the scan before the
+    /// first action.
+    pub fn start(
+        &mut self,
+        plan: &FloorPlan,
+        params: &PipelineParams,
+        config: EpisodeConfig,
+        initial_scan: u32,
+    ) -> Result<(), PipelineError> {
+        self.pipeline.start(plan, params)?;
+        self.state = EpisodeState::new(config);
+        self.history.start(initial_scan);
+        self.stop = None;
+        self.no_returns = 0;
+        self.heading_offset = match (params.rot_bins <= 1, params.known_heading) {
+            (true, Some(h)) => h,
+            _ => 0.0,
+        };
+        Ok(())
+    }
+
+    /// True once the stop rule fired or the action limit is reached.
+    pub fn is_over(&self) -> bool {
+        self.stop.is_some() || self.state.exhausted()
+    }
+
+    /// What a policy sees now.
+    pub fn input(&self) -> PolicyInput<'_> {
+        PolicyInput {
+            localizer: self.pipeline.localizer(),
+            history: &self.history,
+            step: self.state.actions,
+            measurements: self.pipeline.observations().len() as u16,
+            bearing: self.state.bearing(),
+            heading_offset: self.heading_offset,
+        }
+    }
+
+    /// The policy's next action; `None` once the episode is over.
+    pub fn decide(&self, policy: &mut dyn Policy) -> Option<Action> {
+        if self.is_over() {
+            None
+        } else {
+            Some(policy.act(&self.input()))
+        }
+    }
+
+    /// Checks an instrument answer to `action` without booking it.
+    pub fn validate(action: Action, obs: &Observation) -> Result<(), ObservationError> {
+        if obs.scan >> SCAN_PIXELS != 0 {
+            return Err(ObservationError::ScanBits);
+        }
+        if let Some(range) = obs.range {
+            if action != Action::Measure {
+                return Err(ObservationError::RangeOnRotation);
+            }
+            if !range.is_finite() {
+                return Err(ObservationError::NonFiniteRange);
+            }
+            if range < 0.0 {
+                return Err(ObservationError::NegativeRange);
+            }
+        }
+        Ok(())
+    }
+
+    /// Books the instrument's answer to `action`: encoder bearing, counts and cost, the
+    /// history, the GHT vote of a returned range and the stop rule. A rejected answer
+    /// changes nothing.
+    pub fn observe(
+        &mut self,
+        action: Action,
+        obs: &Observation,
+    ) -> Result<Booked, ObservationError> {
+        Self::validate(action, obs)?;
+        self.state.apply(action);
+        self.history.push(action, obs.scan);
+        Ok(match (action, obs.range) {
+            (Action::Measure, Some(range)) => {
+                // A range of exactly 0 is valid on the wire but not a vote: it counts as
+                // no return (the localizer refuses it).
+                if self.pipeline.measure(self.state.bearing(), range) {
+                    self.stop = self.pipeline.should_stop();
+                    Booked::Vote
+                } else {
+                    self.no_returns = self.no_returns.saturating_add(1);
+                    Booked::NoReturn
+                }
+            }
+            (Action::Measure, None) => {
+                self.no_returns = self.no_returns.saturating_add(1);
+                Booked::NoReturn
+            }
+            _ => Booked::Rotation,
+        })
+    }
+
+    /// Ends the episode: the coarse estimate and its refinement.
+    pub fn finish(&self, plan: &FloorPlan) -> PipelineResult {
+        self.pipeline.finish(plan)
+    }
+
+    /// Why the episode stopped early, if it did.
+    pub fn stop(&self) -> Option<Stop> {
+        self.stop
+    }
+
+    /// Counts, bearing and cost so far.
+    pub fn state(&self) -> &EpisodeState {
+        &self.state
+    }
+
+    /// Measurement actions without a usable return.
+    pub fn no_returns(&self) -> u16 {
+        self.no_returns
+    }
+
+    /// The pipeline (localizer, measurements).
+    pub fn pipeline(&self) -> &Pipeline {
+        &self.pipeline
+    }
+
+    /// The policy's history.
+    pub fn history(&self) -> &History {
+        &self.history
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agents::{AgentKind, BaselineAgent};
+    use crate::geometry::v2;
+    use crate::pipeline::Termination;
+
+    #[test]
+    fn rejects_bad_answers_and_keeps_state() {
+        let plan = FloorPlan::new(&[v2(0.0, 0.0), v2(6.0, 0.0), v2(6.0, 4.0), v2(0.0, 4.0)])
+            .unwrap()
+            .centered();
+        let mut r = EpisodeRunner::new_empty();
+        let params = PipelineParams {
+            rot_bins: 10,
+            known_heading: None,
+            ground_truth: None,
+            termination: Termination::ActionLimit,
+            registration_seed: 1,
+        };
+        r.start(&plan, &params, EpisodeConfig::default(), 0)
+            .unwrap();
+        let mut agent = BaselineAgent::new(AgentKind::Heuristic1, 1);
+        assert_eq!(r.decide(&mut agent), Some(Action::Measure));
+        let bad = [
+            Observation {
+                range: Some(f32::NAN),
+                scan: 0,
+            },
+            Observation {
+                range: Some(-1.0),
+                scan: 0,
+            },
+            Observation {
+                range: Some(1.0),
+                scan: 1 << SCAN_PIXELS,
+            },
+        ];
+        for o in &bad {
+            assert!(r.observe(Action::Measure, o).is_err());
+        }
+        assert!(r
+            .observe(
+                Action::RotateLeft,
+                &Observation {
+                    range: Some(1.0),
+                    scan: 0
+                }
+            )
+            .is_err());
+        assert_eq!(r.state().actions, 0);
+        assert_eq!(r.history().action(0), None);
+        let ok = Observation {
+            range: Some(2.0),
+            scan: 3,
+        };
+        assert_eq!(r.observe(Action::Measure, &ok), Ok(Booked::Vote));
+        assert_eq!(r.state().measurements, 1);
+        assert_eq!(r.history().scan(0), Some(3));
+        assert_eq!(r.input().measurements, 1);
+        let zero = Observation {
+            range: Some(0.0),
+            scan: 0,
+        };
+        assert_eq!(r.observe(Action::Measure, &zero), Ok(Booked::NoReturn));
+        assert_eq!(r.no_returns(), 1);
+    }
+}
