@@ -4,7 +4,8 @@
 //! instrument and its sensors ([`world`], [`sensor`]), the episode runner with its
 //! trajectory log ([`episode`]), the evaluation harness ([`eval`], [`plot`]) and SVG
 //! rendering ([`svg`]); the classical grid Markov localizer ([`classical`]) and the
-//! localization / registration benchmarks ([`bench_localization`], [`bench_registration`]).
+//! localization / registration benchmarks ([`bench_localization`], [`bench_registration`]);
+//! the learned actor-critic policy network and its policy file format ([`learn`]).
 //! [`link`], [`device`] and [`remote`] talk the instrument serial protocol
 //! (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a
 //! thread. The `activesense` binary (`src/main.rs`) is the command-line front end.
@@ -15,6 +16,7 @@ pub mod classical;
 pub mod device;
 pub mod episode;
 pub mod eval;
+pub mod learn;
 pub mod link;
 pub mod plans;
 pub mod plot;

@@ -1,0 +1,895 @@
+//! The actor-critic policy network (paper Fig. 2, after Chaplot et al. 2018), sized for a
+//! Cortex-M4: architecture id 1, `"conv8-16-fc64"`. Forward and backward are written by hand
+//! in f32 so training needs no framework, runs on two CPU cores, and is bit-reproducible.
+//!
+//! ```text
+//! belief K×30×30 ─ conv1 3×3/2 K→8 ─ ReLU ─ conv2 3×3/2 8→16 ─ ReLU ─ flatten 1024
+//!                  (8×15×15)                (16×8×8)                     │
+//!                                                   fc_belief 1024→64 ─ ReLU ─┐
+//! side S ────────────────────────────────────────── fc_side   S→64    ─ ReLU ─┴ concat 128
+//!   ─ fc_joint 128→64 ─ ReLU ─┬─ actor  64→3 logits (0 rotate-left, 1 rotate-right, 2 measure)
+//!                             └─ critic 64→1 value
+//! ```
+//!
+//! Both convolutions use zero padding 1. Inputs: the belief map is `K` planes of 30×30,
+//! layout `[plane][y][x]` row-major, values in `[0, 1]`; the side features are `S` floats.
+//!
+//! **Parameter layout.** All parameters live in one flat `Vec<f32>`, layer after layer in the
+//! order of [`NetShape::layers`] (conv1, conv2, fc_belief, fc_side, fc_joint, actor, critic);
+//! within a layer the weights come first, then the biases. Conv weights are
+//! `[out][in][ky][kx]`, linear weights `[out][in]` (row `o` is contiguous, so a forward output
+//! is one dot product). The conv2 output is flattened channel-major, `[c][y][x]`.
+//!
+//! **Determinism.** A batch is cut into chunks of [`GRAD_CHUNK`] samples; each chunk
+//! accumulates its gradient into its own buffer and the buffers are summed in chunk order.
+//! The float operations done therefore never depend on the rayon thread count, so the same
+//! inputs give bit-identical gradients on 1 or 16 threads.
+
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Architecture id written in policy files.
+pub const ARCH_ID: u16 = 1;
+/// Human-readable architecture name.
+pub const ARCH_NAME: &str = "conv8-16-fc64";
+/// Side of the square belief map (cells).
+pub const GRID: usize = 30;
+/// Largest supported number of rotation bins `K` (belief planes).
+pub const MAX_ROT_BINS: usize = 10;
+/// Actions: 0 rotate-left, 1 rotate-right, 2 measure.
+pub const N_ACTIONS: usize = 3;
+/// Samples per gradient chunk. Fixed (not derived from the thread count) so the summation
+/// order, hence every gradient bit, is the same however many threads run the chunks.
+pub const GRAD_CHUNK: usize = 8;
+/// Convolution kernel side, stride and zero padding (both conv layers).
+pub const CONV_KERNEL: usize = 3;
+/// Convolution stride.
+pub const CONV_STRIDE: usize = 2;
+/// Convolution zero padding.
+pub const CONV_PAD: usize = 1;
+
+const C1: usize = 8;
+const C2: usize = 16;
+const S1: usize = 15; // conv1 output side: (30 + 2 - 3) / 2 + 1
+const S2: usize = 8; // conv2 output side: (15 + 2 - 3) / 2 + 1
+const P0: usize = GRID * GRID;
+const P1: usize = S1 * S1;
+const P2: usize = S2 * S2;
+const FLAT: usize = C2 * P2;
+const HIDDEN: usize = 64;
+const KK: usize = CONV_KERNEL * CONV_KERNEL;
+
+// One sample's kept activations (all post-ReLU), back to back: conv1 | conv2 | fc_belief |
+// fc_side | fc_joint. fc_belief and fc_side are adjacent so they *are* the concat.
+const A1: usize = C1 * P1;
+const OFF_HB: usize = A1 + FLAT;
+const OFF_HJ: usize = OFF_HB + 2 * HIDDEN;
+const ACTS: usize = OFF_HJ + HIDDEN;
+
+/// Input sizes of a network; everything else is fixed by the architecture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct NetShape {
+    /// Rotation bins `K` = belief planes, `1..=MAX_ROT_BINS`.
+    pub rot_bins: usize,
+    /// Length `S` of the side-feature vector.
+    pub side: usize,
+}
+
+/// What a layer computes (for the int8 quantiser and the firmware port).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LayerKind {
+    /// `CONV_KERNEL`² kernel, stride `CONV_STRIDE`, zero padding `CONV_PAD`, square maps.
+    Conv {
+        in_ch: usize,
+        out_ch: usize,
+        in_size: usize,
+        out_size: usize,
+    },
+    /// Fully connected, weight `[outputs][inputs]`.
+    Linear { inputs: usize, outputs: usize },
+}
+
+/// One layer's place in the flat parameter vector: weights at `offset..offset + weight_len`,
+/// then `bias_len` biases.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Layer {
+    pub name: &'static str,
+    pub kind: LayerKind,
+    /// Whether a ReLU follows (false for the two heads).
+    pub relu: bool,
+    pub offset: usize,
+    pub weight_len: usize,
+    pub bias_len: usize,
+}
+
+impl Layer {
+    /// Weights and biases together.
+    pub fn len(&self) -> usize {
+        self.weight_len + self.bias_len
+    }
+    /// Never true; present because `len` is.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    pub fn weights(&self) -> Range<usize> {
+        self.offset..self.offset + self.weight_len
+    }
+    pub fn bias(&self) -> Range<usize> {
+        self.offset + self.weight_len..self.offset + self.len()
+    }
+    /// Weights feeding one output (one row of the weight matrix): the fan-in.
+    pub fn fan_in(&self) -> usize {
+        match self.kind {
+            LayerKind::Conv { in_ch, .. } => in_ch * KK,
+            LayerKind::Linear { inputs, .. } => inputs,
+        }
+    }
+    /// Multiply-accumulates per sample.
+    pub fn macs(&self) -> usize {
+        match self.kind {
+            LayerKind::Conv { out_size, .. } => self.weight_len * out_size * out_size,
+            LayerKind::Linear { .. } => self.weight_len,
+        }
+    }
+}
+
+/// Index of each layer in [`NetShape::layers`].
+const L_CONV1: usize = 0;
+const L_CONV2: usize = 1;
+const L_BELIEF: usize = 2;
+const L_SIDE: usize = 3;
+const L_JOINT: usize = 4;
+const L_ACTOR: usize = 5;
+const L_CRITIC: usize = 6;
+/// Number of layers.
+pub const N_LAYERS: usize = 7;
+
+impl NetShape {
+    /// Floats in one belief map: `K·30·30`.
+    pub fn belief_len(&self) -> usize {
+        self.rot_bins * P0
+    }
+
+    /// The layers in parameter order (an array, so the hot paths can call it freely).
+    pub fn layers(&self) -> [Layer; N_LAYERS] {
+        let conv = |in_ch, out_ch, in_size, out_size| LayerKind::Conv {
+            in_ch,
+            out_ch,
+            in_size,
+            out_size,
+        };
+        let lin = |inputs, outputs| LayerKind::Linear { inputs, outputs };
+        let specs = [
+            ("conv1", conv(self.rot_bins, C1, GRID, S1), true),
+            ("conv2", conv(C1, C2, S1, S2), true),
+            ("fc_belief", lin(FLAT, HIDDEN), true),
+            ("fc_side", lin(self.side, HIDDEN), true),
+            ("fc_joint", lin(2 * HIDDEN, HIDDEN), true),
+            ("actor", lin(HIDDEN, N_ACTIONS), false),
+            ("critic", lin(HIDDEN, 1), false),
+        ];
+        let mut offset = 0;
+        specs.map(|(name, kind, relu)| {
+            let (weight_len, bias_len) = match kind {
+                LayerKind::Conv { in_ch, out_ch, .. } => (out_ch * in_ch * KK, out_ch),
+                LayerKind::Linear { inputs, outputs } => (outputs * inputs, outputs),
+            };
+            let layer = Layer {
+                name,
+                kind,
+                relu,
+                offset,
+                weight_len,
+                bias_len,
+            };
+            offset += layer.len();
+            layer
+        })
+    }
+
+    /// Length of the flat parameter vector.
+    pub fn param_count(&self) -> usize {
+        let last = self.layers()[N_LAYERS - 1];
+        last.offset + last.len()
+    }
+
+    /// Multiply-accumulates for one decision (one forward pass), biases and ReLUs not counted.
+    pub fn macs(&self) -> usize {
+        self.layers().iter().map(Layer::macs).sum()
+    }
+
+    fn assert_valid(&self) {
+        assert!(
+            (1..=MAX_ROT_BINS).contains(&self.rot_bins),
+            "rot_bins must be 1..={MAX_ROT_BINS}, got {}",
+            self.rot_bins
+        );
+    }
+}
+
+/// One decision's network output.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Output {
+    /// Unnormalised action scores (0 rotate-left, 1 rotate-right, 2 measure).
+    pub logits: [f32; N_ACTIONS],
+    /// The critic's state-value estimate.
+    pub value: f32,
+}
+
+/// The network: its shape and its flat parameters (layout in the module doc).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PolicyNet {
+    pub shape: NetShape,
+    pub params: Vec<f32>,
+}
+
+impl PolicyNet {
+    /// Deterministic initialisation from `seed`. Hidden layers: He/Kaiming-uniform over the
+    /// fan-in, `U(±√(6/fan_in))`, right for ReLU. Heads: `U(±√(3/fan_in))` (unit gain), scaled
+    /// ×0.01 for the actor so the first policy is near-uniform (every action explored), ×1 for
+    /// the critic. Biases 0. Panics unless `1 <= rot_bins <= MAX_ROT_BINS`.
+    pub fn new(shape: NetShape, seed: u64) -> Self {
+        shape.assert_valid();
+        let mut rng = Pcg64::seed_from_u64(seed);
+        let mut params = vec![0.0; shape.param_count()];
+        for (i, layer) in shape.layers().iter().enumerate() {
+            let fan_in = layer.fan_in() as f32;
+            let bound = match i {
+                L_ACTOR => 0.01 * (3.0 / fan_in).sqrt(),
+                L_CRITIC => (3.0 / fan_in).sqrt(),
+                _ => (6.0 / fan_in).sqrt(),
+            };
+            for w in &mut params[layer.weights()] {
+                *w = rng.gen_range(-bound..bound);
+            }
+        }
+        PolicyNet { shape, params }
+    }
+
+    /// Wraps existing parameters; `None` if their count does not fit the shape.
+    pub fn from_params(shape: NetShape, params: Vec<f32>) -> Option<Self> {
+        (params.len() == shape.param_count() && (1..=MAX_ROT_BINS).contains(&shape.rot_bins))
+            .then_some(PolicyNet { shape, params })
+    }
+
+    /// One decision. Allocates a [`Scratch`]; use [`PolicyNet::forward_with`] in loops.
+    pub fn forward(&self, belief: &[f32], side: &[f32]) -> Output {
+        self.forward_with(belief, side, &mut Scratch::new(self.shape))
+    }
+
+    /// One decision without allocating. Bit-identical to the matching row of
+    /// [`PolicyNet::forward_batch`] (same code, same order).
+    pub fn forward_with(&self, belief: &[f32], side: &[f32], scratch: &mut Scratch) -> Output {
+        self.check_inputs(belief, side, 1);
+        assert_eq!(scratch.shape, self.shape, "scratch built for another shape");
+        let Scratch {
+            acts, col1, col2, ..
+        } = scratch;
+        forward_sample(&self.shape, &self.params, belief, side, acts, col1, col2)
+    }
+
+    /// Batched forward of `b` samples (`belief`: `b·K·900`, `side`: `b·S`, sample-major) that
+    /// keeps in `cache` what [`PolicyNet::backward_batch`] needs. Returns logits and values.
+    pub fn forward_batch(
+        &self,
+        belief: &[f32],
+        side: &[f32],
+        b: usize,
+        cache: &mut BatchCache,
+    ) -> (Vec<[f32; N_ACTIONS]>, Vec<f32>) {
+        self.check_inputs(belief, side, b);
+        cache.prepare(self.shape, b);
+        let (bl, sl) = (self.shape.belief_len(), self.shape.side);
+        let stride = bl + sl;
+        for i in 0..b {
+            let row = &mut cache.inputs[i * stride..(i + 1) * stride];
+            row[..bl].copy_from_slice(&belief[i * bl..(i + 1) * bl]);
+            row[bl..].copy_from_slice(&side[i * sl..(i + 1) * sl]);
+        }
+        let (shape, params) = (&self.shape, &self.params[..]);
+        cache
+            .inputs
+            .par_chunks(stride * GRAD_CHUNK)
+            .zip(cache.acts.par_chunks_mut(ACTS * GRAD_CHUNK))
+            .zip(cache.outputs.par_chunks_mut(GRAD_CHUNK))
+            .zip(cache.work.par_iter_mut())
+            .for_each(|(((inputs, acts), outputs), work)| {
+                let s = &mut work.scratch;
+                for ((input, act), out) in inputs
+                    .chunks(stride)
+                    .zip(acts.chunks_mut(ACTS))
+                    .zip(outputs.iter_mut())
+                {
+                    let (bel, sd) = input.split_at(bl);
+                    *out = forward_sample(shape, params, bel, sd, act, &mut s.col1, &mut s.col2);
+                }
+            });
+        let logits = cache.outputs.iter().map(|o| o.logits).collect();
+        let values = cache.outputs.iter().map(|o| o.value).collect();
+        (logits, values)
+    }
+
+    /// Backpropagates `dlogits` (`b·3`) and `dvalues` (`b`), the loss gradients w.r.t. the
+    /// outputs of the last [`PolicyNet::forward_batch`], and *adds* the parameter gradient
+    /// summed over the batch to `grad` (`param_count` long). Deterministic for any thread count.
+    pub fn backward_batch(
+        &self,
+        cache: &mut BatchCache,
+        dlogits: &[f32],
+        dvalues: &[f32],
+        grad: &mut [f32],
+    ) {
+        let b = cache.b;
+        assert_eq!(
+            cache.shape,
+            Some(self.shape),
+            "cache filled by another shape"
+        );
+        assert_eq!(dlogits.len(), b * N_ACTIONS, "dlogits length");
+        assert_eq!(dvalues.len(), b, "dvalues length");
+        assert_eq!(grad.len(), self.shape.param_count(), "grad length");
+        let (shape, params) = (&self.shape, &self.params[..]);
+        let bl = shape.belief_len();
+        let stride = bl + shape.side;
+        let BatchCache {
+            inputs, acts, work, ..
+        } = cache;
+        work.par_iter_mut()
+            .zip(inputs.par_chunks(stride * GRAD_CHUNK))
+            .zip(acts.par_chunks(ACTS * GRAD_CHUNK))
+            .zip(dlogits.par_chunks(N_ACTIONS * GRAD_CHUNK))
+            .zip(dvalues.par_chunks(GRAD_CHUNK))
+            .for_each(|((((work, inputs), acts), dls), dvs)| {
+                let ChunkWork { grad, scratch } = work;
+                grad.fill(0.0);
+                for (((input, act), dl), &dv) in inputs
+                    .chunks(stride)
+                    .zip(acts.chunks(ACTS))
+                    .zip(dls.chunks(N_ACTIONS))
+                    .zip(dvs)
+                {
+                    let (bel, sd) = input.split_at(bl);
+                    let dl = [dl[0], dl[1], dl[2]];
+                    backward_sample(
+                        shape,
+                        params,
+                        bel,
+                        sd,
+                        act,
+                        dl,
+                        dv,
+                        Some(grad),
+                        scratch,
+                        None,
+                    );
+                }
+            });
+        // Sum the chunk buffers in chunk order. Parallel over parameter ranges only: each
+        // element still sees chunk 0, 1, 2, ... in that order.
+        let work = &cache.work;
+        grad.par_chunks_mut(4096).enumerate().for_each(|(si, g)| {
+            let span = si * 4096..si * 4096 + g.len();
+            for w in work {
+                for (gi, ci) in g.iter_mut().zip(&w.grad[span.clone()]) {
+                    *gi += ci;
+                }
+            }
+        });
+    }
+
+    /// Gradient of `dlogits·logits + dvalue·value` w.r.t. the inputs (belief, side) for one
+    /// sample, plain backprop through the ReLUs. For saliency maps; allocates.
+    pub fn input_gradient(
+        &self,
+        belief: &[f32],
+        side: &[f32],
+        dlogits: [f32; N_ACTIONS],
+        dvalue: f32,
+    ) -> (Vec<f32>, Vec<f32>) {
+        let mut s = Scratch::new(self.shape);
+        self.forward_with(belief, side, &mut s);
+        let mut dbelief = vec![0.0; self.shape.belief_len()];
+        let mut dside = vec![0.0; self.shape.side];
+        let acts = std::mem::take(&mut s.acts);
+        backward_sample(
+            &self.shape,
+            &self.params,
+            belief,
+            side,
+            &acts,
+            dlogits,
+            dvalue,
+            None,
+            &mut s,
+            Some((&mut dbelief, &mut dside)),
+        );
+        (dbelief, dside)
+    }
+
+    fn check_inputs(&self, belief: &[f32], side: &[f32], b: usize) {
+        assert_eq!(belief.len(), b * self.shape.belief_len(), "belief length");
+        assert_eq!(side.len(), b * self.shape.side, "side length");
+    }
+}
+
+/// Reusable per-sample buffers: activations, im2col matrices and backward temporaries.
+#[derive(Clone, Debug)]
+pub struct Scratch {
+    shape: NetShape,
+    acts: Vec<f32>,
+    col1: Vec<f32>,
+    col2: Vec<f32>,
+    dcol: Vec<f32>,
+    da1: Vec<f32>,
+    da2: Vec<f32>,
+    dhj: Vec<f32>,
+    dcat: Vec<f32>,
+}
+
+impl Scratch {
+    pub fn new(shape: NetShape) -> Self {
+        shape.assert_valid();
+        let r1 = shape.rot_bins * KK;
+        Scratch {
+            shape,
+            acts: vec![0.0; ACTS],
+            col1: vec![0.0; r1 * P1],
+            col2: vec![0.0; C1 * KK * P2],
+            dcol: vec![0.0; (r1 * P1).max(C1 * KK * P2)],
+            da1: vec![0.0; A1],
+            da2: vec![0.0; FLAT],
+            dhj: vec![0.0; HIDDEN],
+            dcat: vec![0.0; 2 * HIDDEN],
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct ChunkWork {
+    grad: Vec<f32>,
+    scratch: Scratch,
+}
+
+/// What a batched forward keeps for its backward: a copy of the inputs, every sample's
+/// activations, and one gradient buffer + scratch per [`GRAD_CHUNK`]-sample chunk. Reuse it
+/// across updates to avoid reallocating.
+#[derive(Clone, Debug, Default)]
+pub struct BatchCache {
+    shape: Option<NetShape>,
+    b: usize,
+    inputs: Vec<f32>,
+    acts: Vec<f32>,
+    outputs: Vec<Output>,
+    work: Vec<ChunkWork>,
+}
+
+impl BatchCache {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Samples held by the last forward.
+    pub fn batch_len(&self) -> usize {
+        self.b
+    }
+
+    fn prepare(&mut self, shape: NetShape, b: usize) {
+        if self.shape != Some(shape) {
+            self.work.clear();
+            self.shape = Some(shape);
+        }
+        self.b = b;
+        self.inputs
+            .resize(b * (shape.belief_len() + shape.side), 0.0);
+        self.acts.resize(b * ACTS, 0.0);
+        let blank = Output {
+            logits: [0.0; N_ACTIONS],
+            value: 0.0,
+        };
+        self.outputs.resize(b, blank);
+        let chunks = b.div_ceil(GRAD_CHUNK);
+        self.work.truncate(chunks);
+        while self.work.len() < chunks {
+            self.work.push(ChunkWork {
+                grad: vec![0.0; shape.param_count()],
+                scratch: Scratch::new(shape),
+            });
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Per-sample kernels. Forward and backward of one sample; the batch paths call exactly these.
+
+fn split_wb<'a>(params: &'a [f32], layer: &Layer) -> (&'a [f32], &'a [f32]) {
+    (&params[layer.weights()], &params[layer.bias()])
+}
+
+fn forward_sample(
+    shape: &NetShape,
+    params: &[f32],
+    belief: &[f32],
+    side: &[f32],
+    acts: &mut [f32],
+    col1: &mut [f32],
+    col2: &mut [f32],
+) -> Output {
+    let layers = shape.layers();
+    let (a1, rest) = acts.split_at_mut(A1);
+    let (a2, rest) = rest.split_at_mut(FLAT);
+    let (hcat, hj) = rest.split_at_mut(2 * HIDDEN);
+
+    let (w, b) = split_wb(params, &layers[L_CONV1]);
+    im2col(shape.rot_bins, GRID, S1, belief, col1);
+    conv_forward(w, b, col1, a1);
+    relu(a1);
+
+    let (w, b) = split_wb(params, &layers[L_CONV2]);
+    im2col(C1, S1, S2, a1, col2);
+    conv_forward(w, b, col2, a2);
+    relu(a2);
+
+    let (hb, hs) = hcat.split_at_mut(HIDDEN);
+    let (w, b) = split_wb(params, &layers[L_BELIEF]);
+    linear(w, b, a2, hb);
+    relu(hb);
+    let (w, b) = split_wb(params, &layers[L_SIDE]);
+    linear(w, b, side, hs);
+    relu(hs);
+
+    let (w, b) = split_wb(params, &layers[L_JOINT]);
+    linear(w, b, hcat, hj);
+    relu(hj);
+
+    let mut logits = [0.0; N_ACTIONS];
+    let (w, b) = split_wb(params, &layers[L_ACTOR]);
+    linear(w, b, hj, &mut logits);
+    let mut value = [0.0];
+    let (w, b) = split_wb(params, &layers[L_CRITIC]);
+    linear(w, b, hj, &mut value);
+    Output {
+        logits,
+        value: value[0],
+    }
+}
+
+/// Backward of one sample from the output gradients. Adds parameter gradients into `grad`
+/// when given; writes input gradients into `input_grad` when given (then the first-layer
+/// parameter gradients are still added if `grad` is given).
+#[allow(clippy::too_many_arguments)]
+fn backward_sample(
+    shape: &NetShape,
+    params: &[f32],
+    belief: &[f32],
+    side: &[f32],
+    acts: &[f32],
+    dlogits: [f32; N_ACTIONS],
+    dvalue: f32,
+    mut grad: Option<&mut [f32]>,
+    s: &mut Scratch,
+    input_grad: Option<(&mut [f32], &mut [f32])>,
+) {
+    let layers = shape.layers();
+    let (a1, rest) = acts.split_at(A1);
+    let (a2, rest) = rest.split_at(FLAT);
+    let (hcat, hj) = rest.split_at(2 * HIDDEN);
+    let (hb, hs) = hcat.split_at(HIDDEN);
+    // Heads: both read hj.
+    let (dinput, dside) = match input_grad {
+        Some((db, ds)) => (Some(db), Some(ds)),
+        None => (None, None),
+    };
+    s.dhj.fill(0.0);
+    let (w, _) = split_wb(params, &layers[L_ACTOR]);
+    linear_backward(
+        w,
+        hj,
+        &dlogits,
+        layer_grad(&mut grad, &layers[L_ACTOR]),
+        Some(&mut s.dhj),
+    );
+    let (w, _) = split_wb(params, &layers[L_CRITIC]);
+    linear_backward(
+        w,
+        hj,
+        &[dvalue],
+        layer_grad(&mut grad, &layers[L_CRITIC]),
+        Some(&mut s.dhj),
+    );
+    relu_mask(&mut s.dhj, hj);
+
+    s.dcat.fill(0.0);
+    let (w, _) = split_wb(params, &layers[L_JOINT]);
+    linear_backward(
+        w,
+        hcat,
+        &s.dhj,
+        layer_grad(&mut grad, &layers[L_JOINT]),
+        Some(&mut s.dcat),
+    );
+    relu_mask(&mut s.dcat, hcat);
+    let (dhb, dhs) = s.dcat.split_at(HIDDEN);
+
+    let (w, _) = split_wb(params, &layers[L_SIDE]);
+    if let Some(ds) = dside {
+        ds.fill(0.0);
+        linear_backward(
+            w,
+            side,
+            dhs,
+            layer_grad(&mut grad, &layers[L_SIDE]),
+            Some(ds),
+        );
+    } else {
+        linear_backward(w, side, dhs, layer_grad(&mut grad, &layers[L_SIDE]), None);
+    }
+    debug_assert_eq!(hs.len(), dhs.len());
+
+    s.da2.fill(0.0);
+    let (w, _) = split_wb(params, &layers[L_BELIEF]);
+    linear_backward(
+        w,
+        a2,
+        dhb,
+        layer_grad(&mut grad, &layers[L_BELIEF]),
+        Some(&mut s.da2),
+    );
+    relu_mask(&mut s.da2, a2);
+    debug_assert_eq!(hb.len(), dhb.len());
+
+    // conv2: recompute its im2col from a1 rather than keeping it per sample.
+    let (w, _) = split_wb(params, &layers[L_CONV2]);
+    im2col(C1, S1, S2, a1, &mut s.col2);
+    let dcol2 = &mut s.dcol[..C1 * KK * P2];
+    conv_backward(
+        C2,
+        w,
+        &s.col2,
+        &s.da2,
+        layer_grad(&mut grad, &layers[L_CONV2]),
+        Some(&mut *dcol2),
+    );
+    s.da1.fill(0.0);
+    col2im_add(C1, S1, S2, dcol2, &mut s.da1);
+    relu_mask(&mut s.da1, a1);
+
+    let (w, _) = split_wb(params, &layers[L_CONV1]);
+    im2col(shape.rot_bins, GRID, S1, belief, &mut s.col1);
+    match dinput {
+        Some(dbel) => {
+            let dcol1 = &mut s.dcol[..shape.rot_bins * KK * P1];
+            conv_backward(
+                C1,
+                w,
+                &s.col1,
+                &s.da1,
+                layer_grad(&mut grad, &layers[L_CONV1]),
+                Some(&mut *dcol1),
+            );
+            dbel.fill(0.0);
+            col2im_add(shape.rot_bins, GRID, S1, dcol1, dbel);
+        }
+        None => conv_backward(
+            C1,
+            w,
+            &s.col1,
+            &s.da1,
+            layer_grad(&mut grad, &layers[L_CONV1]),
+            None,
+        ),
+    }
+}
+
+/// The (weight, bias) gradient slices of `layer`, when parameter gradients are wanted.
+fn layer_grad<'a>(
+    grad: &'a mut Option<&mut [f32]>,
+    layer: &Layer,
+) -> Option<(&'a mut [f32], &'a mut [f32])> {
+    grad.as_deref_mut()
+        .map(|g| g[layer.offset..layer.offset + layer.len()].split_at_mut(layer.weight_len))
+}
+
+// ---------------------------------------------------------------------------------------
+// Layer kernels. Written as contiguous-slice loops the compiler vectorises.
+
+/// Dot product with 8 independent accumulators: f32 sums are not reassociated by the
+/// compiler, so one accumulator would run serially; 8 lanes vectorise (and the order is
+/// fixed, so results are reproducible).
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    debug_assert_eq!(a.len(), b.len());
+    let mut acc = [0.0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for j in 0..8 {
+            acc[j] += x[j] * y[j];
+        }
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+#[inline]
+fn sum(a: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let c = a.chunks_exact(8);
+    let tail: f32 = c.remainder().iter().sum();
+    for x in c {
+        for j in 0..8 {
+            acc[j] += x[j];
+        }
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+/// `y += a·x`.
+#[inline]
+fn axpy(y: &mut [f32], a: f32, x: &[f32]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += a * xi;
+    }
+}
+
+fn relu(v: &mut [f32]) {
+    for x in v {
+        *x = if *x > 0.0 { *x } else { 0.0 };
+    }
+}
+
+/// Zeroes the gradient where the ReLU output was 0 (derivative 0 at the kink).
+fn relu_mask(d: &mut [f32], y: &[f32]) {
+    for (di, yi) in d.iter_mut().zip(y) {
+        if *yi <= 0.0 {
+            *di = 0.0;
+        }
+    }
+}
+
+/// `y = W·x + b` with `W` `[out][in]`.
+fn linear(w: &[f32], b: &[f32], x: &[f32], y: &mut [f32]) {
+    let n = x.len();
+    for (o, yo) in y.iter_mut().enumerate() {
+        *yo = b[o] + dot(&w[o * n..(o + 1) * n], x);
+    }
+}
+
+/// Backward of `y = W·x + b` given `dy`: `dW += dy·xᵀ`, `db += dy`, `dx += Wᵀ·dy`.
+/// Rows with `dy = 0` (dead ReLUs) are skipped.
+fn linear_backward(
+    w: &[f32],
+    x: &[f32],
+    dy: &[f32],
+    dwb: Option<(&mut [f32], &mut [f32])>,
+    dx: Option<&mut [f32]>,
+) {
+    let n = x.len();
+    if let Some((dw, db)) = dwb {
+        for (o, &g) in dy.iter().enumerate() {
+            if g != 0.0 {
+                db[o] += g;
+                axpy(&mut dw[o * n..(o + 1) * n], g, x);
+            }
+        }
+    }
+    if let Some(dx) = dx {
+        for (o, &g) in dy.iter().enumerate() {
+            if g != 0.0 {
+                axpy(dx, g, &w[o * n..(o + 1) * n]);
+            }
+        }
+    }
+}
+
+/// Unfolds a `cin × size_in²` map into the `[cin·9][size_out²]` patch matrix of a 3×3,
+/// stride 2, pad 1 convolution; row `(c·3 + ky)·3 + kx` matches the weight layout.
+fn im2col(cin: usize, size_in: usize, size_out: usize, input: &[f32], col: &mut [f32]) {
+    let p = size_out * size_out;
+    for c in 0..cin {
+        let plane = &input[c * size_in * size_in..(c + 1) * size_in * size_in];
+        for ky in 0..CONV_KERNEL {
+            for kx in 0..CONV_KERNEL {
+                let r = (c * CONV_KERNEL + ky) * CONV_KERNEL + kx;
+                let row = &mut col[r * p..(r + 1) * p];
+                for oy in 0..size_out {
+                    let dst = &mut row[oy * size_out..(oy + 1) * size_out];
+                    let iy = (oy * CONV_STRIDE + ky).wrapping_sub(CONV_PAD);
+                    if iy >= size_in {
+                        dst.fill(0.0);
+                        continue;
+                    }
+                    let src = &plane[iy * size_in..(iy + 1) * size_in];
+                    for (ox, d) in dst.iter_mut().enumerate() {
+                        let ix = (ox * CONV_STRIDE + kx).wrapping_sub(CONV_PAD);
+                        *d = if ix < size_in { src[ix] } else { 0.0 };
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Adjoint of [`im2col`]: scatters patch-matrix gradients back onto the input map (`+=`).
+fn col2im_add(cin: usize, size_in: usize, size_out: usize, col: &[f32], dinput: &mut [f32]) {
+    let p = size_out * size_out;
+    for c in 0..cin {
+        let plane = &mut dinput[c * size_in * size_in..(c + 1) * size_in * size_in];
+        for ky in 0..CONV_KERNEL {
+            for kx in 0..CONV_KERNEL {
+                let r = (c * CONV_KERNEL + ky) * CONV_KERNEL + kx;
+                let row = &col[r * p..(r + 1) * p];
+                for oy in 0..size_out {
+                    let iy = (oy * CONV_STRIDE + ky).wrapping_sub(CONV_PAD);
+                    if iy >= size_in {
+                        continue;
+                    }
+                    let src = &row[oy * size_out..(oy + 1) * size_out];
+                    let dst = &mut plane[iy * size_in..(iy + 1) * size_in];
+                    for (ox, g) in src.iter().enumerate() {
+                        let ix = (ox * CONV_STRIDE + kx).wrapping_sub(CONV_PAD);
+                        if ix < size_in {
+                            dst[ix] += g;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `out[o] = b[o] + Σ_r W[o][r]·col[r]`: the convolution as a small matmul. Row-outer so each
+/// patch row is read once and the few output rows stay in L1.
+fn conv_forward(w: &[f32], b: &[f32], col: &[f32], out: &mut [f32]) {
+    let cout = b.len();
+    let p = out.len() / cout;
+    let rows = w.len() / cout;
+    for (o, ob) in out.chunks_exact_mut(p).enumerate() {
+        ob.fill(b[o]);
+    }
+    for r in 0..rows {
+        let cr = &col[r * p..(r + 1) * p];
+        for (o, ob) in out.chunks_exact_mut(p).enumerate() {
+            axpy(ob, w[o * rows + r], cr);
+        }
+    }
+}
+
+/// Backward of [`conv_forward`] for `cout` output channels: `dW[o][r] += dout[o]·col[r]`,
+/// `db[o] += Σ dout[o]`, and `dcol[r] = Σ_o W[o][r]·dout[o]` when wanted (overwritten).
+fn conv_backward(
+    cout: usize,
+    w: &[f32],
+    col: &[f32],
+    dout: &[f32],
+    dwb: Option<(&mut [f32], &mut [f32])>,
+    dcol: Option<&mut [f32]>,
+) {
+    let rows = w.len() / cout;
+    let p = dout.len() / cout;
+    if let Some((dw, db)) = dwb {
+        for (o, d) in dout.chunks_exact(p).enumerate() {
+            db[o] += sum(d);
+            let dwo = &mut dw[o * rows..(o + 1) * rows];
+            for (r, g) in dwo.iter_mut().enumerate() {
+                *g += dot(d, &col[r * p..(r + 1) * p]);
+            }
+        }
+    }
+    if let Some(dcol) = dcol {
+        for (r, dc) in dcol.chunks_exact_mut(p).enumerate() {
+            dc.fill(0.0);
+            for (o, d) in dout.chunks_exact(p).enumerate() {
+                let wv = w[o * rows + r];
+                if wv != 0.0 {
+                    axpy(dc, wv, d);
+                }
+            }
+        }
+    }
+}
