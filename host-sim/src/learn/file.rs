@@ -382,3 +382,218 @@ pub fn check_shape(shape: &NetShape, rot_bins: u8, side: usize) -> Result<(), Po
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_pcg::Pcg64;
+    use serde_json::json;
+
+    fn small() -> (PolicyNet, serde_json::Value) {
+        let net = PolicyNet::new(
+            NetShape {
+                rot_bins: 1,
+                side: 3,
+            },
+            9,
+        );
+        let meta = json!({"command": "activesense train --seed 9", "seed": 9, "updates": 12, "wall_s": 1.5});
+        (net, meta)
+    }
+
+    fn tmp_path(name: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("activesense-{}-{name}", std::process::id()))
+    }
+
+    #[test]
+    fn round_trip_is_bit_identical() {
+        let net = PolicyNet::new(
+            NetShape {
+                rot_bins: 10,
+                side: 108,
+            },
+            3,
+        );
+        let meta = json!({"seed": 3, "note": "ünïcode ok"});
+        let path = tmp_path("roundtrip.policy");
+        save(&path, &net, &meta).unwrap();
+        let (back, back_meta) = load(&path).unwrap();
+        let (again, _) = load_expecting(&path, 10, 108).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(back.shape, net.shape);
+        let bits = |n: &PolicyNet| n.params.iter().map(|p| p.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back), bits(&net));
+        assert_eq!(bits(&again), bits(&net));
+        assert_eq!(back_meta, meta);
+        let bytes = to_bytes(&net, &meta).unwrap();
+        assert_eq!(&bytes[..8], b"ASPOLICY");
+        assert_eq!(u32_at(&bytes, 16) as usize, net.shape.param_count());
+    }
+
+    #[test]
+    fn every_truncation_is_rejected() {
+        let (net, meta) = small();
+        let bytes = to_bytes(&net, &meta).unwrap();
+        for n in 0..bytes.len() {
+            match from_bytes(&bytes[..n]) {
+                Err(PolicyFileError::Truncated { .. }) => {}
+                other => panic!("length {n}: {:?}", other.map(|_| ())),
+            }
+        }
+        let mut long = bytes.clone();
+        long.push(0);
+        assert!(matches!(
+            from_bytes(&long),
+            Err(PolicyFileError::TrailingBytes { .. })
+        ));
+        assert!(from_bytes(&bytes).is_ok());
+    }
+
+    /// A CRC-32 detects every single-bit error, so every flip of the header (and of the
+    /// metadata, and a sample of the parameters) must be rejected, with some error.
+    #[test]
+    fn every_single_bit_flip_is_rejected() {
+        let (net, meta) = small();
+        let bytes = to_bytes(&net, &meta).unwrap();
+        let meta_end = HEADER_LEN + u32_at(&bytes, 20) as usize;
+        let mut rng = Pcg64::seed_from_u64(1);
+        let positions = (0..meta_end)
+            .chain((0..200).map(|_| rng.gen_range(meta_end..bytes.len())))
+            .chain(bytes.len() - 4..bytes.len());
+        for pos in positions {
+            for bit in 0..8 {
+                let mut bad = bytes.clone();
+                bad[pos] ^= 1 << bit;
+                assert!(
+                    from_bytes(&bad).is_err(),
+                    "flip at byte {pos} bit {bit} accepted"
+                );
+            }
+        }
+        let mut body_flip = bytes.clone();
+        body_flip[meta_end + 5] ^= 0x10;
+        assert!(matches!(
+            from_bytes(&body_flip),
+            Err(PolicyFileError::ChecksumMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn header_errors_are_specific() {
+        let (net, meta) = small();
+        let bytes = to_bytes(&net, &meta).unwrap();
+        let with = |at: usize, v: &[u8]| {
+            let mut b = bytes.clone();
+            b[at..at + v.len()].copy_from_slice(v);
+            from_bytes(&b).map(|_| ()).unwrap_err()
+        };
+        assert!(matches!(with(0, b"NOTAPOLI"), PolicyFileError::BadMagic));
+        assert!(matches!(
+            with(8, &2u16.to_le_bytes()),
+            PolicyFileError::UnsupportedVersion(2)
+        ));
+        assert!(matches!(
+            with(10, &7u16.to_le_bytes()),
+            PolicyFileError::UnknownArchitecture(7)
+        ));
+        assert!(matches!(
+            with(12, &[11]),
+            PolicyFileError::InvalidRotBins(11)
+        ));
+        assert!(matches!(
+            with(12, &[2]),
+            PolicyFileError::ShapeMismatch { .. }
+        ));
+        assert!(matches!(
+            with(20, &u32::MAX.to_le_bytes()),
+            PolicyFileError::MetadataTooLong { .. }
+        ));
+        // Non-finite weight with a valid checksum: only the finiteness check can catch it.
+        let mut nan = bytes.clone();
+        let at = HEADER_LEN + u32_at(&bytes, 20) as usize + 4 * 7;
+        nan[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+        let n = nan.len() - 4;
+        let crc = crc32(&nan[..n]).to_le_bytes();
+        nan[n..].copy_from_slice(&crc);
+        assert!(matches!(
+            from_bytes(&nan),
+            Err(PolicyFileError::NonFiniteWeight { index: 7 })
+        ));
+        // And the writer refuses to produce such a file.
+        let mut bad_net = net.clone();
+        bad_net.params[3] = f32::INFINITY;
+        assert!(matches!(
+            to_bytes(&bad_net, &meta),
+            Err(PolicyFileError::NonFiniteWeight { index: 3 })
+        ));
+    }
+
+    #[test]
+    fn messages_name_the_file_and_the_problem() {
+        let (net, meta) = small();
+        let path = tmp_path("corrupt.policy");
+        let mut bytes = to_bytes(&net, &meta).unwrap();
+        let last = bytes.len() - 10;
+        bytes[last] ^= 1;
+        std::fs::write(&path, &bytes).unwrap();
+        let msg = load(&path).unwrap_err().to_string();
+        assert!(
+            msg.starts_with(&format!(
+                "policy file '{}': checksum mismatch (stored 0x",
+                path.display()
+            )),
+            "{msg}"
+        );
+        assert!(msg.ends_with("): the file is corrupt"), "{msg}");
+
+        save(&path, &net, &meta).unwrap();
+        let err = load_expecting(&path, 10, 3).unwrap_err();
+        assert!(matches!(
+            err.error,
+            PolicyFileError::WrongRotBins {
+                expected: 10,
+                found: 1
+            }
+        ));
+        assert!(
+            err.to_string()
+                .contains("trained for rot_bins K=1, but K=10"),
+            "{err}"
+        );
+        let err = load_expecting(&path, 1, 108).unwrap_err();
+        assert!(matches!(
+            err.error,
+            PolicyFileError::WrongSideLength {
+                expected: 108,
+                found: 3
+            }
+        ));
+        std::fs::remove_file(&path).unwrap();
+        let err = load(&path).unwrap_err();
+        assert!(matches!(err.error, PolicyFileError::Io(_)));
+    }
+
+    /// Random garbage, with and without a valid-looking header, never panics.
+    #[test]
+    fn garbage_never_panics() {
+        let (net, meta) = small();
+        let valid = to_bytes(&net, &meta).unwrap();
+        let mut rng = Pcg64::seed_from_u64(2);
+        for i in 0..2000 {
+            let len = rng.gen_range(0..200);
+            let mut g: Vec<u8> = (0..len).map(|_| rng.gen()).collect();
+            if i % 2 == 0 {
+                let keep = rng.gen_range(0..=HEADER_LEN.min(g.len()));
+                g[..keep].copy_from_slice(&valid[..keep]);
+            }
+            assert!(from_bytes(&g).is_err());
+        }
+        // Valid header, garbage after it, at the full length.
+        let mut g = valid.clone();
+        for b in &mut g[HEADER_LEN..] {
+            *b = rng.gen();
+        }
+        assert!(from_bytes(&g).is_err());
+    }
+}

@@ -501,6 +501,111 @@ impl BatchCache {
 }
 
 // ---------------------------------------------------------------------------------------
+// Loss helpers for the A2C trainer (which computes dlogits / dvalue itself).
+
+/// Log-probabilities of the categorical over the actions; max-shifted so large logits do
+/// not overflow.
+pub fn log_softmax(logits: &[f32; N_ACTIONS]) -> [f32; N_ACTIONS] {
+    let m = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let lse = m + logits.iter().map(|l| (l - m).exp()).sum::<f32>().ln();
+    logits.map(|l| l - lse)
+}
+
+/// Action probabilities.
+pub fn softmax(logits: &[f32; N_ACTIONS]) -> [f32; N_ACTIONS] {
+    log_softmax(logits).map(f32::exp)
+}
+
+/// Entropy `−Σ p·log p` of the categorical (nats); `ln 3` at most.
+pub fn entropy(logits: &[f32; N_ACTIONS]) -> f32 {
+    let lp = log_softmax(logits);
+    -lp.iter().map(|l| l.exp() * l).sum::<f32>()
+}
+
+/// `∂ log p(action) / ∂ logits = onehot(action) − p`.
+pub fn log_prob_grad(logits: &[f32; N_ACTIONS], action: usize) -> [f32; N_ACTIONS] {
+    let mut g = softmax(logits).map(|p| -p);
+    g[action] += 1.0;
+    g
+}
+
+/// `∂ entropy / ∂ logits = −p·(log p + H)`.
+pub fn entropy_grad(logits: &[f32; N_ACTIONS]) -> [f32; N_ACTIONS] {
+    let lp = log_softmax(logits);
+    let h = -lp.iter().map(|l| l.exp() * l).sum::<f32>();
+    lp.map(|l| -l.exp() * (l + h))
+}
+
+/// Scales `grad` so its L2 norm is at most `max_norm`; returns the norm before clipping
+/// (accumulated in f64, sequentially, so it is reproducible). A non-finite norm leaves the
+/// gradient as it is: the caller should skip that update.
+pub fn clip_global_norm(grad: &mut [f32], max_norm: f32) -> f32 {
+    let norm = grad
+        .iter()
+        .map(|&g| f64::from(g) * f64::from(g))
+        .sum::<f64>()
+        .sqrt() as f32;
+    if norm.is_finite() && norm > max_norm {
+        let scale = max_norm / (norm + 1e-6);
+        for g in grad.iter_mut() {
+            *g *= scale;
+        }
+    }
+    norm
+}
+
+/// Adam (Kingma & Ba 2015) with bias correction, PyTorch's update order. `eps` is 1e-5, the
+/// usual RL choice (CleanRL, SB3), larger than the 1e-8 default to damp tiny second moments.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Adam {
+    pub lr: f32,
+    pub beta1: f32,
+    pub beta2: f32,
+    pub eps: f32,
+    /// Steps taken so far.
+    pub t: u32,
+    /// First-moment estimate per parameter.
+    pub m: Vec<f32>,
+    /// Second-moment estimate per parameter.
+    pub v: Vec<f32>,
+}
+
+impl Adam {
+    pub fn new(n_params: usize, lr: f32) -> Self {
+        Adam {
+            lr,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-5,
+            t: 0,
+            m: vec![0.0; n_params],
+            v: vec![0.0; n_params],
+        }
+    }
+
+    /// One descent step: `params −= lr·m̂ / (√v̂ + eps)`.
+    pub fn step(&mut self, params: &mut [f32], grad: &[f32]) {
+        assert_eq!(params.len(), self.m.len(), "params length");
+        assert_eq!(grad.len(), self.m.len(), "grad length");
+        self.t += 1;
+        let bc1 = 1.0 - self.beta1.powi(self.t as i32);
+        let bc2_sqrt = (1.0 - self.beta2.powi(self.t as i32)).sqrt();
+        let step = self.lr / bc1;
+        let (b1, b2, eps) = (self.beta1, self.beta2, self.eps);
+        for (((p, &g), m), v) in params
+            .iter_mut()
+            .zip(grad)
+            .zip(&mut self.m)
+            .zip(&mut self.v)
+        {
+            *m = b1 * *m + (1.0 - b1) * g;
+            *v = b2 * *v + (1.0 - b2) * g * g;
+            *p -= step * *m / (v.sqrt() / bc2_sqrt + eps);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
 // Per-sample kernels. Forward and backward of one sample; the batch paths call exactly these.
 
 fn split_wb<'a>(params: &'a [f32], layer: &Layer) -> (&'a [f32], &'a [f32]) {
@@ -890,6 +995,526 @@ fn conv_backward(
                     axpy(dc, wv, d);
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SMALL: NetShape = NetShape {
+        rot_bins: 2,
+        side: 5,
+    };
+    const REAL: NetShape = NetShape {
+        rot_bins: 10,
+        side: 108,
+    };
+
+    /// A network with every parameter (biases and the actor head included) at a healthy
+    /// random scale, so every layer has gradient and the ReLUs are a mix of on and off.
+    fn lively_net(shape: NetShape, seed: u64) -> PolicyNet {
+        let mut net = PolicyNet::new(shape, seed);
+        let mut rng = Pcg64::seed_from_u64(seed ^ 0xabcd);
+        for layer in shape.layers() {
+            let bound = (6.0 / layer.fan_in() as f32).sqrt();
+            for w in &mut net.params[layer.weights()] {
+                *w = rng.gen_range(-bound..bound);
+            }
+            for b in &mut net.params[layer.bias()] {
+                *b = rng.gen_range(-0.1..0.1);
+            }
+        }
+        net
+    }
+
+    fn random_inputs(shape: NetShape, b: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
+        let mut rng = Pcg64::seed_from_u64(seed);
+        let belief = (0..b * shape.belief_len())
+            .map(|_| rng.gen::<f32>())
+            .collect();
+        let side = (0..b * shape.side)
+            .map(|_| rng.gen_range(-1.0..1.0))
+            .collect();
+        (belief, side)
+    }
+
+    fn random_vec(n: usize, seed: u64) -> Vec<f32> {
+        let mut rng = Pcg64::seed_from_u64(seed);
+        (0..n).map(|_| rng.gen_range(-1.0..1.0)).collect()
+    }
+
+    /// Independent f64 reference: direct (not im2col) convolution straight from the
+    /// documented parameter layout.
+    fn reference(shape: &NetShape, p: &[f64], belief: &[f64], side: &[f64]) -> ([f64; 3], f64) {
+        let layers = shape.layers();
+        let conv = |layer: &Layer, input: &[f64]| {
+            let LayerKind::Conv {
+                in_ch,
+                out_ch,
+                in_size,
+                out_size,
+            } = layer.kind
+            else {
+                panic!("not a conv")
+            };
+            let (w, b) = (&p[layer.weights()], &p[layer.bias()]);
+            let mut out = vec![0.0; out_ch * out_size * out_size];
+            for o in 0..out_ch {
+                for oy in 0..out_size {
+                    for ox in 0..out_size {
+                        let mut s = b[o];
+                        for c in 0..in_ch {
+                            for ky in 0..3 {
+                                for kx in 0..3 {
+                                    let iy = (2 * oy + ky) as isize - 1;
+                                    let ix = (2 * ox + kx) as isize - 1;
+                                    if iy < 0
+                                        || ix < 0
+                                        || iy >= in_size as isize
+                                        || ix >= in_size as isize
+                                    {
+                                        continue;
+                                    }
+                                    let (iy, ix) = (iy as usize, ix as usize);
+                                    s += w[((o * in_ch + c) * 3 + ky) * 3 + kx]
+                                        * input[(c * in_size + iy) * in_size + ix];
+                                }
+                            }
+                        }
+                        out[(o * out_size + oy) * out_size + ox] = s.max(0.0);
+                    }
+                }
+            }
+            out
+        };
+        let lin = |layer: &Layer, x: &[f64]| {
+            let (w, b) = (&p[layer.weights()], &p[layer.bias()]);
+            (0..layer.bias_len)
+                .map(|o| {
+                    let s = b[o] + (0..x.len()).map(|i| w[o * x.len() + i] * x[i]).sum::<f64>();
+                    if layer.relu {
+                        s.max(0.0)
+                    } else {
+                        s
+                    }
+                })
+                .collect::<Vec<f64>>()
+        };
+        let a1 = conv(&layers[0], belief);
+        let a2 = conv(&layers[1], &a1);
+        let mut cat = lin(&layers[2], &a2);
+        cat.extend(lin(&layers[3], side));
+        let hj = lin(&layers[4], &cat);
+        let l = lin(&layers[5], &hj);
+        let v = lin(&layers[6], &hj);
+        ([l[0], l[1], l[2]], v[0])
+    }
+
+    fn to64(v: &[f32]) -> Vec<f64> {
+        v.iter().map(|&x| f64::from(x)).collect()
+    }
+
+    #[test]
+    fn layout_sizes_and_macs() {
+        let k1 = NetShape {
+            rot_bins: 1,
+            side: 108,
+        };
+        assert_eq!(k1.param_count(), 82_340);
+        assert_eq!(REAL.param_count(), 82_988);
+        assert_eq!(k1.macs(), 170_824);
+        assert_eq!(REAL.macs(), 316_624);
+        let names: Vec<_> = REAL.layers().iter().map(|l| l.name).collect();
+        assert_eq!(
+            names,
+            [
+                "conv1",
+                "conv2",
+                "fc_belief",
+                "fc_side",
+                "fc_joint",
+                "actor",
+                "critic"
+            ]
+        );
+        let mut next = 0;
+        for l in REAL.layers() {
+            assert_eq!(l.offset, next, "{} not contiguous", l.name);
+            next = l.bias().end;
+        }
+        assert_eq!(next, REAL.param_count());
+    }
+
+    #[test]
+    fn same_seed_same_params_other_seed_other_params() {
+        let a = PolicyNet::new(REAL, 7);
+        let b = PolicyNet::new(REAL, 7);
+        let c = PolicyNet::new(REAL, 8);
+        assert_eq!(a.params, b.params);
+        assert_ne!(a.params, c.params);
+        // Biases start at 0, the actor head small, the critic head not.
+        let layers = REAL.layers();
+        assert!(layers
+            .iter()
+            .all(|l| a.params[l.bias()].iter().all(|&x| x == 0.0)));
+        let max_abs = |l: &Layer| {
+            a.params[l.weights()]
+                .iter()
+                .fold(0.0f32, |m, x| m.max(x.abs()))
+        };
+        assert!(max_abs(&layers[L_ACTOR]) < 0.01 * (3.0f32 / 64.0).sqrt());
+        assert!(max_abs(&layers[L_CRITIC]) > 0.1);
+    }
+
+    #[test]
+    fn forward_matches_f64_reference() {
+        let net = lively_net(SMALL, 3);
+        let (belief, side) = random_inputs(SMALL, 1, 4);
+        let out = net.forward(&belief, &side);
+        let (l, v) = reference(&SMALL, &to64(&net.params), &to64(&belief), &to64(&side));
+        for (a, b) in out
+            .logits
+            .iter()
+            .chain([&out.value])
+            .zip(l.iter().chain([&v]))
+        {
+            assert!(
+                (f64::from(*a) - b).abs() <= 1e-4 * (1.0 + b.abs()),
+                "{a} vs {b}"
+            );
+        }
+        assert!(
+            l.iter().any(|x| x.abs() > 1e-2),
+            "degenerate test network: {l:?}"
+        );
+    }
+
+    #[test]
+    fn single_forward_equals_batch_rows_bitwise() {
+        let net = lively_net(REAL, 5);
+        let b = 11; // not a multiple of GRAD_CHUNK
+        let (belief, side) = random_inputs(REAL, b, 6);
+        let (logits, values) = net.forward_batch(&belief, &side, b, &mut BatchCache::new());
+        let mut s = Scratch::new(REAL);
+        let (bl, sl) = (REAL.belief_len(), REAL.side);
+        for i in 0..b {
+            let one = net.forward_with(
+                &belief[i * bl..(i + 1) * bl],
+                &side[i * sl..(i + 1) * sl],
+                &mut s,
+            );
+            assert_eq!(
+                one.logits.map(f32::to_bits),
+                logits[i].map(f32::to_bits),
+                "row {i}"
+            );
+            assert_eq!(one.value.to_bits(), values[i].to_bits(), "row {i}");
+        }
+    }
+
+    /// Analytic gradients of `L = Σ_samples Σ_i c_i·logit_i + d·value` against central
+    /// differences of the independent f64 reference, for weights and biases of every layer.
+    /// An entry is skipped only if its finite difference is inconsistent at two step sizes
+    /// (a ReLU kink between them); skips must stay rare.
+    #[test]
+    fn parameter_gradients_match_finite_differences() {
+        let shape = SMALL;
+        let b = 3;
+        let net = lively_net(shape, 11);
+        let (belief, side) = random_inputs(shape, b, 12);
+        let c = random_vec(b * N_ACTIONS, 13);
+        let d = random_vec(b, 14);
+
+        let mut cache = BatchCache::new();
+        net.forward_batch(&belief, &side, b, &mut cache);
+        let mut grad = vec![0.0; shape.param_count()];
+        net.backward_batch(&mut cache, &c, &d, &mut grad);
+
+        let (bl, sl) = (shape.belief_len(), shape.side);
+        let (bel64, side64) = (to64(&belief), to64(&side));
+        let loss = |p: &[f64]| {
+            (0..b)
+                .map(|i| {
+                    let (l, v) = reference(
+                        &shape,
+                        p,
+                        &bel64[i * bl..(i + 1) * bl],
+                        &side64[i * sl..(i + 1) * sl],
+                    );
+                    (0..3).map(|a| f64::from(c[i * 3 + a]) * l[a]).sum::<f64>()
+                        + f64::from(d[i]) * v
+                })
+                .sum::<f64>()
+        };
+        let mut p = to64(&net.params);
+        let mut fd = |j: usize, eps: f64| {
+            let orig = p[j];
+            p[j] = orig + eps;
+            let up = loss(&p);
+            p[j] = orig - eps;
+            let down = loss(&p);
+            p[j] = orig;
+            (up - down) / (2.0 * eps)
+        };
+
+        let mut rng = Pcg64::seed_from_u64(15);
+        let (mut checked, mut skipped) = (0, 0);
+        for layer in shape.layers() {
+            for (range, n) in [(layer.weights(), 12), (layer.bias(), 6)] {
+                let mut nonzero = 0;
+                // Half uniformly at random, half among entries with a nonzero analytic
+                // gradient (dead ReLUs zero many weight gradients; both kinds are checked).
+                let live: Vec<usize> = range.clone().filter(|&j| grad[j] != 0.0).collect();
+                let picks: Vec<usize> = if range.len() <= n {
+                    range.clone().collect()
+                } else {
+                    let mut v: Vec<usize> =
+                        (0..n / 2).map(|_| rng.gen_range(range.clone())).collect();
+                    v.extend(
+                        (0..n / 2).filter_map(|_| live.get(rng.gen_range(0..live.len().max(1)))),
+                    );
+                    v
+                };
+                for &j in &picks {
+                    let (n1, n2) = (fd(j, 1e-4), fd(j, 3e-5));
+                    if (n1 - n2).abs() > 1e-6 * (1.0 + n1.abs()) {
+                        skipped += 1;
+                        continue;
+                    }
+                    checked += 1;
+                    let a = f64::from(grad[j]);
+                    assert!(
+                        (a - n1).abs() <= 1e-4 + 2e-3 * n1.abs(),
+                        "{} param {j}: analytic {a}, numeric {n1}",
+                        layer.name
+                    );
+                    if n1.abs() > 1e-4 {
+                        nonzero += 1;
+                    }
+                }
+                assert!(
+                    nonzero * 2 >= picks.len(),
+                    "{}: gradient check nearly vacuous",
+                    layer.name
+                );
+            }
+        }
+        assert!(
+            skipped * 10 <= checked,
+            "{skipped} kinks vs {checked} checked"
+        );
+    }
+
+    #[test]
+    fn input_gradient_matches_finite_differences() {
+        let shape = SMALL;
+        let net = lively_net(shape, 21);
+        let (belief, side) = random_inputs(shape, 1, 22);
+        let c = [0.7f32, -1.3, 0.4];
+        let d = -0.8f32;
+        let (gb, gs) = net.input_gradient(&belief, &side, c, d);
+        let p = to64(&net.params);
+        let loss = |bel: &[f64], sd: &[f64]| {
+            let (l, v) = reference(&shape, &p, bel, sd);
+            (0..3).map(|a| f64::from(c[a]) * l[a]).sum::<f64>() + f64::from(d) * v
+        };
+        let (mut bel, mut sd) = (to64(&belief), to64(&side));
+        let eps = 1e-4;
+        let mut rng = Pcg64::seed_from_u64(23);
+        let mut nonzero = 0;
+        for _ in 0..30 {
+            let j = rng.gen_range(0..bel.len());
+            let o = bel[j];
+            bel[j] = o + eps;
+            let up = loss(&bel, &sd);
+            bel[j] = o - eps;
+            let n = (up - loss(&bel, &sd)) / (2.0 * eps);
+            bel[j] = o;
+            let a = f64::from(gb[j]);
+            assert!(
+                (a - n).abs() <= 1e-4 + 2e-3 * n.abs(),
+                "belief {j}: {a} vs {n}"
+            );
+            nonzero += usize::from(n.abs() > 1e-4);
+        }
+        assert!(nonzero >= 10, "belief gradient check nearly vacuous");
+        for j in 0..sd.len() {
+            let o = sd[j];
+            sd[j] = o + eps;
+            let up = loss(&bel, &sd);
+            sd[j] = o - eps;
+            let n = (up - loss(&bel, &sd)) / (2.0 * eps);
+            sd[j] = o;
+            let a = f64::from(gs[j]);
+            assert!(
+                (a - n).abs() <= 1e-4 + 2e-3 * n.abs(),
+                "side {j}: {a} vs {n}"
+            );
+        }
+    }
+
+    fn grad_in_pool(
+        threads: usize,
+        net: &PolicyNet,
+        belief: &[f32],
+        side: &[f32],
+        b: usize,
+    ) -> Vec<u32> {
+        let dl = random_vec(b * N_ACTIONS, 31);
+        let dv = random_vec(b, 32);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut cache = BatchCache::new();
+            net.forward_batch(belief, side, b, &mut cache);
+            let mut grad = vec![0.0; net.shape.param_count()];
+            net.backward_batch(&mut cache, &dl, &dv, &mut grad);
+            grad.iter().map(|g| g.to_bits()).collect()
+        })
+    }
+
+    #[test]
+    fn gradients_are_bit_identical_for_any_thread_count() {
+        let net = lively_net(REAL, 41);
+        let b = 37;
+        let (belief, side) = random_inputs(REAL, b, 42);
+        let one = grad_in_pool(1, &net, &belief, &side, b);
+        let three = grad_in_pool(3, &net, &belief, &side, b);
+        let two = grad_in_pool(2, &net, &belief, &side, b);
+        assert!(one.iter().any(|&g| g != 0));
+        assert!(one == three, "1 vs 3 threads differ");
+        assert!(one == two, "1 vs 2 threads differ");
+    }
+
+    #[test]
+    fn backward_adds_to_grad() {
+        let net = lively_net(SMALL, 51);
+        let b = 2;
+        let (belief, side) = random_inputs(SMALL, b, 52);
+        let (dl, dv) = (random_vec(b * 3, 53), random_vec(b, 54));
+        let mut cache = BatchCache::new();
+        net.forward_batch(&belief, &side, b, &mut cache);
+        let mut once = vec![0.0; SMALL.param_count()];
+        net.backward_batch(&mut cache, &dl, &dv, &mut once);
+        let mut twice = once.clone();
+        net.backward_batch(&mut cache, &dl, &dv, &mut twice);
+        for (o, t) in once.iter().zip(&twice) {
+            assert_eq!(2.0 * o, *t);
+        }
+    }
+
+    #[test]
+    fn loss_helpers() {
+        let z = [0.0f32; 3];
+        assert!((entropy(&z) - 3f32.ln()).abs() < 1e-6);
+        assert!((softmax(&[1.0, 2.0, 3.0]).iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        let big = log_softmax(&[1000.0, 0.0, -1000.0]);
+        assert!(big.iter().all(|x| !x.is_nan()) && big[0].abs() < 1e-6);
+        // Analytic logit gradients against central differences.
+        let l = [0.3f32, -0.8, 1.1];
+        let eps = 1e-3;
+        let (ge, gl) = (entropy_grad(&l), log_prob_grad(&l, 1));
+        for k in 0..3 {
+            let (mut up, mut down) = (l, l);
+            up[k] += eps;
+            down[k] -= eps;
+            let ne = (entropy(&up) - entropy(&down)) / (2.0 * eps);
+            let nl = (log_softmax(&up)[1] - log_softmax(&down)[1]) / (2.0 * eps);
+            assert!(
+                (ge[k] - ne).abs() < 1e-3,
+                "entropy grad {k}: {} vs {ne}",
+                ge[k]
+            );
+            assert!(
+                (gl[k] - nl).abs() < 1e-3,
+                "log-prob grad {k}: {} vs {nl}",
+                gl[k]
+            );
+        }
+    }
+
+    #[test]
+    fn adam_and_clipping() {
+        // First Adam step moves each parameter by about lr against its gradient's sign
+        // (bias correction makes m̂/√v̂ = ±1), and not at all for a zero gradient.
+        let mut p = vec![1.0f32, 1.0, 1.0];
+        let mut adam = Adam::new(3, 0.01);
+        adam.step(&mut p, &[0.5, -2.0, 0.0]);
+        assert!(
+            (p[0] - 0.99).abs() < 1e-4 && (p[1] - 1.01).abs() < 1e-4 && p[2] == 1.0,
+            "{p:?}"
+        );
+        assert_eq!(adam.t, 1);
+
+        let mut g = vec![3.0f32, 4.0];
+        assert_eq!(clip_global_norm(&mut g, 1.0), 5.0);
+        assert!((g[0].hypot(g[1]) - 1.0).abs() < 1e-5);
+        let mut small = vec![0.3f32, 0.4];
+        assert!((clip_global_norm(&mut small, 1.0) - 0.5).abs() < 1e-6);
+        assert_eq!(small, [0.3, 0.4]);
+    }
+
+    /// Timings for the report: `cargo test --release --lib learn::net::tests::timing -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn timing() {
+        use std::time::Instant;
+        for k in [1, 10] {
+            let shape = NetShape {
+                rot_bins: k,
+                side: 108,
+            };
+            let net = PolicyNet::new(shape, 1);
+            let (belief, side) = random_inputs(shape, 1, 2);
+            let mut s = Scratch::new(shape);
+            let mut acc = 0.0;
+            for _ in 0..200 {
+                acc += net.forward_with(&belief, &side, &mut s).value;
+            }
+            let n = 5000;
+            let t = Instant::now();
+            for _ in 0..n {
+                acc += net.forward_with(&belief, &side, &mut s).value;
+            }
+            let us = t.elapsed().as_secs_f64() * 1e6 / n as f64;
+            println!("batch-1 forward K={k}: {us:.1} us ({acc:.1})");
+        }
+        let b = 256;
+        let net = lively_net(REAL, 3);
+        let (belief, side) = random_inputs(REAL, b, 4);
+        let (dl, dv) = (random_vec(b * 3, 5), random_vec(b, 6));
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut cache = BatchCache::new();
+                let mut grad = vec![0.0; REAL.param_count()];
+                let reps = 10;
+                let (mut tf, mut tb) = (0.0, 0.0);
+                for rep in 0..reps + 2 {
+                    let t = Instant::now();
+                    net.forward_batch(&belief, &side, b, &mut cache);
+                    let t1 = Instant::now();
+                    net.backward_batch(&mut cache, &dl, &dv, &mut grad);
+                    if rep >= 2 {
+                        tf += (t1 - t).as_secs_f64();
+                        tb += t1.elapsed().as_secs_f64();
+                    }
+                }
+                let ms = |x: f64| x * 1e3 / reps as f64;
+                println!(
+                    "batch-256 K=10, {threads} thread(s): forward {:.1} ms + backward {:.1} ms = {:.1} ms",
+                    ms(tf),
+                    ms(tb),
+                    ms(tf + tb)
+                );
+            });
         }
     }
 }
