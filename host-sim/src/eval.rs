@@ -22,7 +22,8 @@
 //! - *measurements / rotations*: mean counts per episode, including failed episodes that
 //!   ran to the action limit.
 
-use crate::episode::{run_episode, EpisodeSpec, Termination, Trajectory};
+use crate::episode::{EpisodeSpec, Termination, Trajectory};
+use crate::learn::agent::{run_agent_episode, Policies};
 use crate::sensor::SensorModel;
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::EpisodeConfig;
@@ -53,6 +54,12 @@ pub struct EvalOptions {
     pub sensor: SensorModel,
     /// Termination rule.
     pub termination: Termination,
+    /// Files of the learnt policies (when the learnt agent is evaluated).
+    #[serde(default)]
+    pub policy_files: Vec<String>,
+    /// The learnt policies themselves.
+    #[serde(skip)]
+    pub policies: Policies,
     /// Show a progress bar.
     #[serde(skip)]
     pub progress: bool,
@@ -326,7 +333,10 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
                 termination: opts.termination,
             };
             let t = Instant::now();
-            let row = EpisodeRow::of(&run_episode(&spec));
+            // The policies were loaded for every evaluated setting before the run.
+            let row = EpisodeRow::of(
+                &run_agent_episode(&spec, &opts.policies).expect("policy loaded for every K"),
+            );
             bar.inc(1);
             (g, row, t.elapsed().as_secs_f64())
         })
@@ -551,6 +561,8 @@ mod tests {
             config: EpisodeConfig::default(),
             sensor: SensorModel::default(),
             termination: Termination::Oracle,
+            policy_files: Vec::new(),
+            policies: Policies::default(),
             progress: false,
         }
     }

@@ -3,9 +3,8 @@
 
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
-use activesense_sim::episode::{
-    parse_agent, parse_termination, run_episode, scan_string, EpisodeSpec,
-};
+use activesense_sim::episode::{parse_agent, parse_termination, scan_string, EpisodeSpec};
+use activesense_sim::learn::agent::{run_agent_episode, Policies};
 use activesense_sim::plans::{self, Family};
 use activesense_sim::sensor::SensorModel;
 use activesense_sim::svg::{self, Scene};
@@ -31,8 +30,11 @@ struct Cli {
 enum Command {
     /// Generate one floor-plan from its seed and draw it (outline, visual centre, agent disc, agent).
     Plan(PlanArgs),
-    /// Run one simulated episode with a baseline agent and print its step log.
+    /// Run one simulated episode with a baseline or the learnt agent and print its step log.
     Episode(EpisodeArgs),
+    /// Train the learnt sampling policy (advantage actor-critic with GAE, paper §3.1) on
+    /// generated training plans; writes the policy file, its learning curve and logs.
+    Train(TrainArgs),
     /// Run episodes on the instrument controller (QEMU, serial, TCP or loopback) while the host plays its sensors.
     Sim(activesense_sim::remote::SimArgs),
     /// Talk to an instrument controller on a serial port.
@@ -93,9 +95,14 @@ struct BenchRegistrationArgs {
 
 #[derive(Args)]
 struct EvalArgs {
-    /// Comma-separated agent names, or "all" for the seven Table-3 baselines.
+    /// Comma-separated agent names (blind-0..2, heuristic-0..3, learnt), or "all" for the
+    /// seven Table-3 baselines and the learnt policy.
     #[arg(long, default_value = "all", value_parser = parse_agents)]
     agents: AgentList,
+    /// Learnt policy file(s), each used for the K its header names (repeat for K = 1 and
+    /// 10); default: the committed policies/k{K}/policy.policy.
+    #[arg(long)]
+    policy: Vec<PathBuf>,
     /// Comma-separated rotation settings: 1 (heading known) and/or 10.
     #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
     rot_bins: Vec<u8>,
@@ -133,7 +140,9 @@ struct AgentList(Vec<AgentKind>);
 
 fn parse_agents(s: &str) -> Result<AgentList, String> {
     if s == "all" {
-        return Ok(AgentList(AgentKind::ALL.to_vec()));
+        let mut all = AgentKind::ALL.to_vec();
+        all.insert(0, AgentKind::Learnt);
+        return Ok(AgentList(all));
     }
     let mut v = Vec::new();
     for name in s.split(',').map(str::trim).filter(|n| !n.is_empty()) {
@@ -228,9 +237,13 @@ struct EpisodeArgs {
     /// Plan seed (u32).
     #[arg(long)]
     seed: u32,
-    /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3.
+    /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
+    /// learnt.
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
     agent: AgentKind,
+    /// Policy file for the learnt agent (default: the committed policies/k{K}/policy.policy).
+    #[arg(long)]
+    policy: Option<PathBuf>,
     /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=10))]
     rot_bins: u8,
@@ -265,6 +278,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Plan(a) => cmd_plan(a),
         Command::Episode(a) => cmd_episode(a),
+        Command::Train(a) => cmd_train(a),
         Command::Dataset(a) => cmd_dataset(a),
         Command::Eval(a) => cmd_eval(a),
         Command::BenchRegistration(a) => cmd_bench_registration(a),
@@ -379,7 +393,15 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         sensor: a.sensor.model()?,
         termination: a.termination,
     };
-    let t = run_episode(&spec);
+    let policies = if spec.agent.is_baseline() {
+        Policies::default()
+    } else {
+        Policies::load(a.policy.as_slice(), &[spec.rot_bins])?
+    };
+    let t = run_agent_episode(&spec, &policies)?;
+    for p in policies.iter() {
+        println!("policy: {}", p.path.display());
+    }
     println!(
         "episode: plan {} agent {} rot-bins {} max-actions {} episode-seed {}",
         spec.plan_seed,
@@ -539,8 +561,17 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
         },
         sensor: a.sensor.model()?,
         termination: a.termination,
+        policy_files: Vec::new(),
+        policies: Policies::default(),
         progress: !a.no_progress && std::io::stderr().is_terminal(),
     };
+    let mut opts = opts;
+    if opts.agents.contains(&AgentKind::Learnt) {
+        opts.policies = Policies::load(&a.policy, &opts.rot_bins)?;
+        opts.policy_files = opts.policies.iter().map(|p| p.describe()).collect();
+    } else if !a.policy.is_empty() {
+        bail!("--policy given but the learnt agent is not among --agents");
+    }
     let command = std::env::args()
         .map(|w| w.rsplit('/').next().unwrap_or(&w).to_string())
         .collect::<Vec<_>>()
@@ -554,10 +585,10 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
     );
     let (report, timing) = eval::run(&opts);
     let files = eval::write_outputs(&report, &timing, &a.out, &command)?;
-    println!("agent         bins  recognition  pose error (m)  measurements  rotations");
+    println!("agent         bins  recognition  pose error (m)  measurements  rotations   cost");
     for r in &report.results {
         println!(
-            "{:<12}  {:>4}  {:>11.3}  {:>14}  {:>12.2}  {:>9.2}",
+            "{:<12}  {:>4}  {:>11.3}  {:>14}  {:>12.2}  {:>9.2}  {:.3}",
             r.agent,
             r.rot_bins,
             r.recognition_rate,
@@ -565,7 +596,8 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
                 .map(|e| format!("{e:.4}"))
                 .unwrap_or_else(|| "-".into()),
             r.measurements,
-            r.rotations
+            r.rotations,
+            r.cost
         );
     }
     println!("{:.1} s wall time", timing.total_s);
@@ -592,6 +624,133 @@ fn cmd_bench_localization(a: BenchLocalizationArgs) -> Result<()> {
     if let Some(path) = a.json {
         std::fs::write(&path, serde_json::to_string_pretty(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+#[derive(Args)]
+struct TrainArgs {
+    /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=10))]
+    rot_bins: u8,
+    /// Number of updates (each: --envs environments × --segment steps, one gradient step).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
+    updates: u64,
+    /// Stop after this many minutes of wall time even if --updates is not reached (the
+    /// result then depends on the machine's speed; --updates alone is reproducible).
+    #[arg(long)]
+    minutes: Option<f64>,
+    /// Master seed (network, rooms, noise, action draws).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Parallel environments.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=1024))]
+    envs: u64,
+    /// Steps per environment per update (n-step segment).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=512))]
+    segment: u64,
+    /// Warm-start updates imitating the teacher (0 = pure A2C from scratch).
+    #[arg(long, default_value_t = 200)]
+    imitation_updates: u64,
+    /// Adam learning rate.
+    #[arg(long, default_value_t = 3e-4)]
+    lr: f32,
+    /// Entropy bonus coefficient.
+    #[arg(long, default_value_t = 0.01)]
+    ent_coef: f32,
+    /// Start from this policy file instead of a fresh network (fine-tuning, resuming from
+    /// DIR/checkpoint.policy).
+    #[arg(long)]
+    init: Option<PathBuf>,
+    /// Worker threads (default: all cores). The weights do not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output directory: policy.policy, checkpoint.policy, log.csv, log.json, curve.svg.
+    #[arg(long)]
+    out: PathBuf,
+    /// Print a log line per --log-every updates instead of a progress bar.
+    #[arg(long)]
+    no_progress: bool,
+    /// Updates between log lines.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
+    log_every: u64,
+}
+
+fn cmd_train(a: TrainArgs) -> Result<()> {
+    use activesense_sim::learn::{agent::shape_for, file, train};
+    use std::io::IsTerminal;
+    if a.rot_bins != 1 && a.rot_bins != 10 {
+        bail!(
+            "--rot-bins must be 1 or 10 (the paper's two settings), got {}",
+            a.rot_bins
+        );
+    }
+    if let Some(n) = a.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .context("cannot set the thread count")?;
+    }
+    let mut hp = train::HyperParams::defaults(a.rot_bins);
+    hp.seed = a.seed;
+    hp.updates = a.updates;
+    hp.num_envs = a.envs as usize;
+    hp.segment_len = a.segment as usize;
+    hp.imitation_updates = a.imitation_updates;
+    hp.learning_rate = a.lr;
+    hp.ent_coef = a.ent_coef;
+    hp.log_every = a.log_every;
+    let init = match &a.init {
+        Some(p) => Some(file::load_expecting(p, a.rot_bins, shape_for(a.rot_bins).side)?.0),
+        None => None,
+    };
+    let command = std::env::args()
+        .map(|w| w.rsplit('/').next().unwrap_or(&w).to_string())
+        .collect::<Vec<_>>()
+        .join(" ");
+    let shape = shape_for(a.rot_bins);
+    eprintln!(
+        "training K = {}: network {} ({} parameters, {} multiply-accumulates per decision), {} threads",
+        a.rot_bins,
+        activesense_sim::learn::net::ARCH_NAME,
+        shape.param_count(),
+        shape.macs(),
+        rayon::current_num_threads()
+    );
+    eprintln!("hyper-parameters:\n{}", hp.table());
+    let opts = train::RunOptions {
+        out: Some(a.out.clone()),
+        minutes: a.minutes,
+        progress: !a.no_progress && std::io::stderr().is_terminal(),
+        command,
+        init,
+    };
+    let outcome = train::train(&hp, &opts)?;
+    if let Some(last) = outcome.log.last() {
+        println!(
+            "trained {} updates ({} environment steps, {} episodes) in {:.1} min: last window return {:+.3}, recognition {:.3}, {:.2} measurements, {:.2} rotations, cost {:.3}",
+            outcome.updates,
+            last.env_steps,
+            last.episodes,
+            outcome.wall_s / 60.0,
+            last.mean_return,
+            last.recognition,
+            last.measurements,
+            last.rotations,
+            last.cost
+        );
+    }
+    for f in [
+        "policy.policy",
+        "checkpoint.policy",
+        "log.csv",
+        "log.json",
+        "curve.svg",
+    ] {
+        let p = a.out.join(f);
+        if p.exists() {
+            println!("wrote {}", p.display());
+        }
     }
     Ok(())
 }

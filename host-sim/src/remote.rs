@@ -113,6 +113,12 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
     if a.rot_bins != 1 && a.rot_bins != 10 {
         bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
     }
+    if !a.agent.is_baseline() {
+        bail!(
+            "the instrument does not run the learnt policy yet (it needs the int8 policy in the \
+             firmware); use `activesense episode/eval --agent learnt` on the host, or a baseline here"
+        );
+    }
     Ok(EpisodeSpec {
         plan_seed,
         episode_seed: a.episode_seed,

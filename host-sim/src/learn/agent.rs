@@ -1,0 +1,211 @@
+//! The learnt policy as an agent: a [`PolicyNet`] behind the core's [`Policy`] seam, so the
+//! episode runner, the evaluation and the CLI play it like any baseline. Features come
+//! from [`PolicyInput`] (core code, the same the trainer feeds); the action is the argmax
+//! of the actor's logits (deterministic, as the int8 policy on the instrument decides), or
+//! a draw from the softmax when a seed is given (training).
+
+use super::file::{self, LoadError};
+use super::net::{NetShape, PolicyNet, Scratch};
+use activesense_core::agents::Action;
+use activesense_core::policy::{Policy, PolicyInput, BELIEF_PLANE, SIDE_FEATURES};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Actor output index → action (the network's fixed action order).
+pub const ACTIONS: [Action; 3] = [Action::RotateLeft, Action::RotateRight, Action::Measure];
+
+/// Index of `a` in [`ACTIONS`].
+pub fn action_index(a: Action) -> usize {
+    match a {
+        Action::RotateLeft => 0,
+        Action::RotateRight => 1,
+        Action::Measure => 2,
+    }
+}
+
+/// The network shape for `rot_bins` with the core's side features.
+pub fn shape_for(rot_bins: u8) -> NetShape {
+    NetShape {
+        rot_bins: rot_bins as usize,
+        side: SIDE_FEATURES,
+    }
+}
+
+/// Writes the network inputs for `input` into `belief` (`K × BELIEF_PLANE`) and `side`.
+pub fn features(input: &PolicyInput<'_>, belief: &mut [f32], side: &mut [f32]) {
+    input.write_belief(belief);
+    let side: &mut [f32; SIDE_FEATURES] = side
+        .try_into()
+        .expect("side buffer holds SIDE_FEATURES values");
+    input.write_side(side);
+}
+
+/// Index of the largest logit (first on ties).
+pub fn argmax(logits: &[f32; 3]) -> usize {
+    let mut best = 0;
+    for i in 1..3 {
+        if logits[i] > logits[best] {
+            best = i;
+        }
+    }
+    best
+}
+
+/// A trained policy for one rotation setting, loaded from its file.
+#[derive(Clone, Debug)]
+pub struct LearntPolicy {
+    /// The network.
+    pub net: Arc<PolicyNet>,
+    /// Where it came from.
+    pub path: PathBuf,
+    /// The file's metadata (training command, seed, …).
+    pub meta: serde_json::Value,
+}
+
+impl LearntPolicy {
+    /// Loads `path`, checking it is a policy for `rot_bins` with the core's feature layout.
+    pub fn load(path: &Path, rot_bins: u8) -> Result<Self, LoadError> {
+        let (net, meta) = file::load_expecting(path, rot_bins, SIDE_FEATURES)?;
+        Ok(LearntPolicy {
+            net: Arc::new(net),
+            path: path.to_path_buf(),
+            meta,
+        })
+    }
+
+    /// File name and stored checksum, for reports (`k1/policy.policy (crc 1a2b3c4d)`).
+    pub fn describe(&self) -> String {
+        // The last two path components (`k1/policy.policy`): no machine-specific prefix.
+        let parts: Vec<String> = self
+            .path
+            .components()
+            .rev()
+            .take(2)
+            .map(|c| c.as_os_str().to_string_lossy().into_owned())
+            .collect();
+        let name = parts.into_iter().rev().collect::<Vec<_>>().join("/");
+        let crc = std::fs::read(&self.path)
+            .ok()
+            .and_then(|b| b.get(b.len().saturating_sub(4)..).map(|t| t.to_vec()))
+            .filter(|t| t.len() == 4)
+            .map(|t| u32::from_le_bytes([t[0], t[1], t[2], t[3]]));
+        match crc {
+            Some(c) => format!("{name} (crc {c:08x})"),
+            None => name,
+        }
+    }
+
+    /// A fresh agent playing this policy greedily.
+    pub fn agent(&self) -> LearntAgent {
+        LearntAgent::new(self.net.clone())
+    }
+}
+
+/// The committed policy file for `rot_bins`: `policies/k{K}/policy.policy` at the workspace
+/// root (the `--out` directory of its training run, with its log and learning curve).
+pub fn default_policy_path(rot_bins: u8) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("policies")
+        .join(format!("k{rot_bins}"))
+        .join("policy.policy")
+}
+
+/// A [`Policy`] that runs the float network.
+pub struct LearntAgent {
+    net: Arc<PolicyNet>,
+    scratch: Scratch,
+    belief: Vec<f32>,
+    side: Vec<f32>,
+    /// Last decision's logits and value (for logs and inspection).
+    pub last: Option<([f32; 3], f32)>,
+}
+
+impl LearntAgent {
+    /// A greedy agent.
+    pub fn new(net: Arc<PolicyNet>) -> Self {
+        let shape = net.shape;
+        LearntAgent {
+            scratch: Scratch::new(shape),
+            belief: vec![0.0; shape.rot_bins * BELIEF_PLANE],
+            side: vec![0.0; SIDE_FEATURES],
+            net,
+            last: None,
+        }
+    }
+}
+
+impl Policy for LearntAgent {
+    fn act(&mut self, input: &PolicyInput<'_>) -> Action {
+        features(input, &mut self.belief, &mut self.side);
+        let out = self
+            .net
+            .forward_with(&self.belief, &self.side, &mut self.scratch);
+        self.last = Some((out.logits, out.value));
+        ACTIONS[argmax(&out.logits)]
+    }
+}
+
+/// The learnt policies of a run, one per rotation setting.
+#[derive(Clone, Debug, Default)]
+pub struct Policies(Vec<LearntPolicy>);
+
+impl Policies {
+    /// Loads a policy for every setting in `rot_bins`: from `given` (files whose header
+    /// says which K they are for; two files for one K is an error), else the committed
+    /// [`default_policy_path`]. Every error names the file and what is wrong.
+    pub fn load(given: &[PathBuf], rot_bins: &[u8]) -> anyhow::Result<Self> {
+        let mut by_k: Vec<(u8, PathBuf)> = Vec::new();
+        for path in given {
+            let (net, _) = file::load(path)?;
+            let k = net.shape.rot_bins as u8;
+            if let Some((_, other)) = by_k.iter().find(|(kk, _)| *kk == k) {
+                anyhow::bail!(
+                    "two policies for K = {k}: '{}' and '{}'",
+                    other.display(),
+                    path.display()
+                );
+            }
+            by_k.push((k, path.clone()));
+        }
+        let mut out = Vec::new();
+        for &k in rot_bins {
+            let path = by_k
+                .iter()
+                .find(|(kk, _)| *kk == k)
+                .map(|(_, p)| p.clone())
+                .unwrap_or_else(|| default_policy_path(k));
+            out.push(LearntPolicy::load(&path, k).map_err(|e| {
+                anyhow::anyhow!("{e} (the learnt agent with --rot-bins {k} needs a policy for K = {k}; train one with `activesense train --rot-bins {k}` or pass --policy FILE)")
+            })?);
+        }
+        Ok(Policies(out))
+    }
+
+    /// The policy for `rot_bins`.
+    pub fn for_rot_bins(&self, rot_bins: u8) -> Option<&LearntPolicy> {
+        self.0
+            .iter()
+            .find(|p| p.net.shape.rot_bins == rot_bins as usize)
+    }
+
+    /// The loaded policies.
+    pub fn iter(&self) -> impl Iterator<Item = &LearntPolicy> {
+        self.0.iter()
+    }
+}
+
+/// Runs one episode of `spec.agent`: a baseline from its seed, or the learnt policy for
+/// `spec.rot_bins` from `policies`.
+pub fn run_agent_episode(
+    spec: &crate::episode::EpisodeSpec,
+    policies: &Policies,
+) -> anyhow::Result<crate::episode::Trajectory> {
+    if spec.agent.is_baseline() {
+        return Ok(crate::episode::run_episode(spec));
+    }
+    let p = policies
+        .for_rot_bins(spec.rot_bins)
+        .ok_or_else(|| anyhow::anyhow!("no learnt policy loaded for K = {}", spec.rot_bins))?;
+    Ok(crate::episode::run_episode_with(spec, &mut p.agent()))
+}

@@ -1,0 +1,803 @@
+//! Advantage actor-critic with GAE (paper §3.1, eqs. 1–4; §4.2), in one file, CleanRL style:
+//! every hyper-parameter is a field of [`HyperParams`] (printed at the start of a run and
+//! stored in the policy file), and [`train`] reads top to bottom: collect a segment of
+//! `num_envs × segment_len` steps from parallel simulated rooms, compute GAE advantages,
+//! take one gradient step, log, checkpoint.
+//!
+//! **Environment.** Each of the `num_envs` environments is a simulated room from the
+//! *training* seeds (`plans::TRAIN_SEEDS`, never the test range) with an
+//! [`EpisodeRunner`]: the same core loop the evaluation and the instrument run, so the
+//! features the network trains on are exactly those it will see. Episodes end on coarse
+//! success (oracle termination, §4.2's first experiment) or at the action limit.
+//!
+//! **Reward** (§4.2; `docs/LEARNING.md` has the formula):
+//! `r_t = −c(a_t) + b(t)` for every action, plus at the end of the episode
+//! `+1` on coarse success or `−1` at the action limit, and
+//! `R_reg · (1 − min(1, (e / e_tol)²))` for the refined registration error `e` (the clipped
+//! quadratic). `c` is 0.05 per measurement and 0.005 per rotation; `b(t) = β · n₀ / (n₀ + N(t))`
+//! is the exploration bonus, decaying with the number `N(t)` of steps with index `t`
+//! visited so far in training (the inverse visitation frequency of the episode length).
+//!
+//! **Warm start.** The first `imitation_updates` updates clone a teacher (heuristic-1 by
+//! default): the teacher acts, the actor is trained by cross-entropy on its actions and the
+//! critic on the returns of the paper's reward. Then the policy acts and A2C takes over.
+//!
+//! **Determinism.** Each environment draws from its own PCG stream derived from the seed;
+//! environments step in parallel but only touch their own state; the visitation counts
+//! are updated between segments in environment order; and the network's gradient is
+//! reduced in a fixed chunk order. The same seed gives the same weights byte for byte,
+//! whatever the number of threads.
+
+use super::agent::{action_index, features, shape_for, ACTIONS};
+use super::file;
+use super::net::{self, Adam, BatchCache, NetShape, PolicyNet};
+use crate::episode::{score, start_episode, EpisodeSpec, Termination};
+use crate::plans;
+use crate::sensor::SensorModel;
+use crate::world::SimWorld;
+use activesense_core::agents::{Action, AgentKind, BaselineAgent};
+use activesense_core::episode::EpisodeConfig;
+use activesense_core::pipeline::Stop;
+use activesense_core::policy::{Policy, BELIEF_PLANE, SIDE_FEATURES};
+use activesense_core::runner::EpisodeRunner;
+use activesense_core::{FloorPlan, Pose2};
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Every hyper-parameter of a training run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HyperParams {
+    /// Master seed: network initialisation, rooms, placements, noise, action draws.
+    pub seed: u64,
+    /// Rotation bins K of the localizer (1 = heading known).
+    pub rot_bins: u8,
+    /// Parallel environments.
+    pub num_envs: usize,
+    /// Steps per environment per update (the n-step segment).
+    pub segment_len: usize,
+    /// Total updates (`--updates`); `--minutes` may stop earlier.
+    pub updates: u64,
+    /// Discount γ (eq. 1).
+    pub gamma: f32,
+    /// GAE λ (eq. 4).
+    pub gae_lambda: f32,
+    /// Adam learning rate (A2C phase).
+    pub learning_rate: f32,
+    /// Adam learning rate while imitating the teacher.
+    pub imitation_learning_rate: f32,
+    /// Entropy bonus coefficient.
+    pub ent_coef: f32,
+    /// Value loss coefficient.
+    pub vf_coef: f32,
+    /// Global gradient-norm clip.
+    pub max_grad_norm: f32,
+    /// Normalise advantages within each update.
+    pub norm_adv: bool,
+    /// Action limit of a training episode.
+    pub max_actions: u16,
+    /// Reward: +this on coarse success.
+    pub success_reward: f32,
+    /// Reward: −this at the action limit.
+    pub limit_penalty: f32,
+    /// Reward: scale R_reg of the clipped quadratic registration term.
+    pub registration_reward: f32,
+    /// Reward: error e_tol (m) at which the registration term reaches 0.
+    pub registration_tolerance: f32,
+    /// Exploration bonus β per step (0 disables it).
+    pub exploration_bonus: f32,
+    /// Visits n₀ at which the bonus for a step index has halved.
+    pub exploration_half_visits: f32,
+    /// Warm-start updates that clone the teacher.
+    pub imitation_updates: u64,
+    /// The teacher (a Table-3 baseline).
+    pub teacher: AgentKind,
+    /// Updates between log lines.
+    pub log_every: u64,
+    /// Updates between checkpoints.
+    pub checkpoint_every: u64,
+}
+
+impl HyperParams {
+    /// The defaults the committed policies were trained with (K set by the caller).
+    pub fn defaults(rot_bins: u8) -> Self {
+        HyperParams {
+            seed: 1,
+            rot_bins,
+            num_envs: 16,
+            segment_len: 16,
+            updates: 1000,
+            gamma: 0.99,
+            gae_lambda: 0.95,
+            learning_rate: 3e-4,
+            imitation_learning_rate: 1e-3,
+            ent_coef: 0.01,
+            vf_coef: 0.5,
+            max_grad_norm: 0.5,
+            norm_adv: true,
+            max_actions: 100,
+            success_reward: 1.0,
+            limit_penalty: 1.0,
+            registration_reward: 1.0,
+            registration_tolerance: 0.10,
+            exploration_bonus: 0.002,
+            exploration_half_visits: 1000.0,
+            imitation_updates: 200,
+            teacher: AgentKind::Heuristic1,
+            log_every: 10,
+            checkpoint_every: 100,
+        }
+    }
+
+    /// One `name = value` line per hyper-parameter.
+    pub fn table(&self) -> String {
+        let v = serde_json::to_value(self).unwrap_or_default();
+        let mut s = String::new();
+        if let Some(map) = v.as_object() {
+            for (k, v) in map {
+                let _ = writeln!(s, "  {k:<24} = {v}");
+            }
+        }
+        s
+    }
+}
+
+/// The paper's reward for one step (before the end-of-episode terms).
+pub fn step_reward(action: Action, bonus: f32) -> f32 {
+    let costs = EpisodeConfig::default().costs;
+    -costs.of(action) + bonus
+}
+
+/// The end-of-episode reward: success/limit and the clipped quadratic registration term.
+pub fn final_reward(hp: &HyperParams, success: bool, pose_error: Option<f32>) -> f32 {
+    let outcome = if success {
+        hp.success_reward
+    } else {
+        -hp.limit_penalty
+    };
+    let reg = pose_error
+        .map(|e| {
+            let x = e / hp.registration_tolerance;
+            hp.registration_reward * (1.0 - (x * x).min(1.0))
+        })
+        .unwrap_or(0.0);
+    outcome + reg
+}
+
+/// Exploration bonus for a step with index `t`, given the visit counts.
+fn bonus(hp: &HyperParams, visits: &[u64], t: usize) -> f32 {
+    if hp.exploration_bonus <= 0.0 {
+        return 0.0;
+    }
+    let n = visits.get(t).copied().unwrap_or(0) as f32;
+    hp.exploration_bonus * hp.exploration_half_visits / (hp.exploration_half_visits + n)
+}
+
+/// One finished training episode.
+#[derive(Clone, Copy, Debug, Default)]
+struct Finished {
+    ret: f32,
+    success: bool,
+    measurements: u16,
+    rotations: u16,
+    cost: f32,
+    pose_error: Option<f32>,
+}
+
+/// One simulated room with its episode loop.
+struct Env {
+    rng: Pcg64,
+    runner: Box<EpisodeRunner>,
+    plan: FloorPlan,
+    world: SimWorld,
+    truth: Pose2,
+    teacher: BaselineAgent,
+    ret: f32,
+}
+
+impl Env {
+    fn new(hp: &HyperParams, index: usize) -> Self {
+        let mut rng = Pcg64::seed_from_u64(crate::episode::splitmix64(
+            hp.seed ^ (index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15),
+        ));
+        let mut runner = Box::new(EpisodeRunner::new_empty());
+        let spec = Self::draw(hp, &mut rng);
+        let (plan, world, _) = start_episode(&spec, &mut runner);
+        Env {
+            truth: world.truth(),
+            teacher: BaselineAgent::new(hp.teacher, spec.agent_seed()),
+            rng,
+            runner,
+            plan,
+            world,
+            ret: 0.0,
+        }
+    }
+
+    /// A fresh episode on a random training plan.
+    fn draw(hp: &HyperParams, rng: &mut Pcg64) -> EpisodeSpec {
+        let plan_seed = rng.gen_range(plans::TRAIN_SEEDS);
+        EpisodeSpec {
+            plan_seed,
+            episode_seed: rng.gen(),
+            agent: AgentKind::Learnt,
+            rot_bins: hp.rot_bins,
+            config: EpisodeConfig {
+                max_actions: hp.max_actions,
+                ..EpisodeConfig::default()
+            },
+            sensor: SensorModel::default(),
+            termination: Termination::Oracle,
+        }
+    }
+
+    fn reset(&mut self, hp: &HyperParams) {
+        let spec = Self::draw(hp, &mut self.rng);
+        let (plan, world, _) = start_episode(&spec, &mut self.runner);
+        self.plan = plan;
+        self.truth = world.truth();
+        self.world = world;
+        self.teacher = BaselineAgent::new(hp.teacher, spec.agent_seed());
+        self.ret = 0.0;
+    }
+
+    /// Samples an action from `logits` with this environment's stream.
+    fn sample(&mut self, logits: &[f32; 3]) -> usize {
+        let p = net::softmax(logits);
+        let u: f32 = self.rng.gen();
+        let mut acc = 0.0;
+        for (i, pi) in p.iter().enumerate() {
+            acc += pi;
+            if u < acc {
+                return i;
+            }
+        }
+        2
+    }
+
+    /// Plays `action`; returns (reward, done, finished-episode summary).
+    fn step(&mut self, hp: &HyperParams, action: Action, bonus: f32) -> (f32, Option<Finished>) {
+        let (obs, _) = self.world.act(action);
+        self.runner
+            .observe(action, &obs)
+            .expect("simulated observation is valid");
+        let mut r = step_reward(action, bonus);
+        if !self.runner.is_over() {
+            self.ret += r;
+            return (r, None);
+        }
+        let success = self.runner.stop() == Some(Stop::CoarseSuccess);
+        let result = self.runner.finish(&self.plan);
+        let outcome = score(&self.plan, &self.truth, &result);
+        r += final_reward(hp, success, outcome.pose_error);
+        self.ret += r;
+        let s = self.runner.state();
+        let done = Finished {
+            ret: self.ret,
+            success,
+            measurements: s.measurements,
+            rotations: s.rotations,
+            cost: s.cost,
+            pose_error: outcome.pose_error.filter(|_| success),
+        };
+        self.reset(hp);
+        (r, Some(done))
+    }
+}
+
+/// One line of the learning curve.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct LogRow {
+    /// Update index (1-based).
+    pub update: u64,
+    /// Environment steps so far.
+    pub env_steps: u64,
+    /// Episodes finished so far.
+    pub episodes: u64,
+    /// Wall time so far (s).
+    pub wall_s: f64,
+    /// "imitation" or "a2c".
+    pub phase: String,
+    /// Mean return of the episodes finished since the last line.
+    pub mean_return: f64,
+    /// Their coarse-success rate.
+    pub recognition: f64,
+    /// Their mean measurements.
+    pub measurements: f64,
+    /// Their mean rotations.
+    pub rotations: f64,
+    /// Their mean action cost.
+    pub cost: f64,
+    /// Their mean pose error over recognised episodes (m).
+    pub pose_error: Option<f64>,
+    /// Mean policy entropy over the last update's samples (nats).
+    pub policy_entropy: f64,
+    /// Last update's value loss.
+    pub value_loss: f64,
+    /// Last update's gradient norm before clipping.
+    pub grad_norm: f64,
+    /// Environment steps per second since the start.
+    pub steps_per_s: f64,
+}
+
+/// What a finished run produced.
+pub struct TrainOutcome {
+    /// The trained network.
+    pub net: PolicyNet,
+    /// The learning curve.
+    pub log: Vec<LogRow>,
+    /// Wall time (s).
+    pub wall_s: f64,
+    /// Updates done.
+    pub updates: u64,
+}
+
+/// Options outside the learning problem itself.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Output directory (policy, logs, curve, checkpoints).
+    pub out: Option<PathBuf>,
+    /// Stop after this many minutes of wall time, whatever `updates` says.
+    pub minutes: Option<f64>,
+    /// Show a progress bar.
+    pub progress: bool,
+    /// The command line, recorded in the policy file.
+    pub command: String,
+    /// Start from this network instead of a fresh one.
+    pub init: Option<PolicyNet>,
+}
+
+/// Trains a policy. See the module doc for the algorithm.
+pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
+    let t0 = Instant::now();
+    let shape: NetShape = shape_for(hp.rot_bins);
+    let mut net = match &opts.init {
+        Some(n) => n.clone(),
+        None => PolicyNet::new(shape, hp.seed),
+    };
+    anyhow::ensure!(net.shape == shape, "initial network has another shape");
+    let mut adam = Adam::new(shape.param_count(), hp.learning_rate);
+    let mut envs: Vec<Env> = (0..hp.num_envs).map(|i| Env::new(hp, i)).collect();
+    let (e, t_len) = (hp.num_envs, hp.segment_len);
+    let (bl, sl) = (hp.rot_bins as usize * BELIEF_PLANE, SIDE_FEATURES);
+    let n = e * t_len;
+    // Rollout storage, [t][env] order.
+    let mut beliefs = vec![0.0f32; n * bl];
+    let mut sides = vec![0.0f32; n * sl];
+    let mut actions = vec![0usize; n];
+    let mut rewards = vec![0.0f32; n];
+    let mut dones = vec![false; n];
+    let mut values = vec![0.0f32; n];
+    let mut visits: Vec<u64> = vec![0; hp.max_actions as usize + 1];
+    let mut cache = BatchCache::new();
+    let mut grad = vec![0.0f32; shape.param_count()];
+    let mut log: Vec<LogRow> = Vec::new();
+    let mut window: Vec<Finished> = Vec::new();
+    let (mut env_steps, mut episodes) = (0u64, 0u64);
+    if let Some(dir) = &opts.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create output directory {}", dir.display()))?;
+    }
+    let bar = progress_bar(opts.progress, hp.updates);
+    let mut csv = String::from(CSV_HEADER);
+    let mut done_updates = 0;
+    for update in 1..=hp.updates {
+        if let Some(m) = opts.minutes {
+            if t0.elapsed().as_secs_f64() > m * 60.0 {
+                break;
+            }
+        }
+        let imitation = update <= hp.imitation_updates;
+        adam.lr = if imitation {
+            hp.imitation_learning_rate
+        } else {
+            hp.learning_rate
+        };
+        // 1. Collect a segment from every environment.
+        for t in 0..t_len {
+            let rows = t * e..(t + 1) * e;
+            beliefs[rows.start * bl..rows.end * bl]
+                .par_chunks_mut(bl)
+                .zip(sides[rows.start * sl..rows.end * sl].par_chunks_mut(sl))
+                .zip(envs.par_iter())
+                .for_each(|((b, s), env)| features(&env.runner.input(), b, s));
+            let (logits, v) = net.forward_batch(
+                &beliefs[rows.start * bl..rows.end * bl],
+                &sides[rows.start * sl..rows.end * sl],
+                e,
+                &mut cache,
+            );
+            values[rows.clone()].copy_from_slice(&v);
+            for (i, env) in envs.iter_mut().enumerate() {
+                actions[rows.start + i] = if imitation {
+                    let input = env.runner.input();
+                    action_index(env.teacher.act(&input))
+                } else {
+                    env.sample(&logits[i])
+                };
+            }
+            let bonuses: Vec<f32> = envs
+                .iter()
+                .map(|env| bonus(hp, &visits, env.runner.state().actions as usize))
+                .collect();
+            let results: Vec<(f32, Option<Finished>)> = envs
+                .par_iter_mut()
+                .enumerate()
+                .map(|(i, env)| env.step(hp, ACTIONS[actions[rows.start + i]], bonuses[i]))
+                .collect();
+            for (i, (r, fin)) in results.into_iter().enumerate() {
+                rewards[rows.start + i] = r;
+                dones[rows.start + i] = fin.is_some();
+                if let Some(f) = fin {
+                    window.push(f);
+                    episodes += 1;
+                }
+            }
+            for env in &envs {
+                // The step index each environment is about to take (visit counts).
+                let k = (env.runner.state().actions as usize).min(visits.len() - 1);
+                visits[k] += 1;
+            }
+            env_steps += e as u64;
+        }
+        // 2. Bootstrap values of the states after the segment, then GAE (eq. 4).
+        let mut next_b = vec![0.0f32; e * bl];
+        let mut next_s = vec![0.0f32; e * sl];
+        next_b
+            .par_chunks_mut(bl)
+            .zip(next_s.par_chunks_mut(sl))
+            .zip(envs.par_iter())
+            .for_each(|((b, s), env)| features(&env.runner.input(), b, s));
+        let (_, next_v) = net.forward_batch(&next_b, &next_s, e, &mut cache);
+        let (advantages, returns) = gae(
+            &rewards,
+            &values,
+            &dones,
+            &next_v,
+            e,
+            t_len,
+            hp.gamma,
+            hp.gae_lambda,
+        );
+        // 3. One gradient step on the whole segment.
+        let (logits, v) = net.forward_batch(&beliefs, &sides, n, &mut cache);
+        let mut adv = advantages.clone();
+        if hp.norm_adv && !imitation {
+            normalise(&mut adv);
+        }
+        let mut dlogits = vec![0.0f32; n * 3];
+        let mut dvalues = vec![0.0f32; n];
+        let (mut entropy_sum, mut vloss_sum) = (0.0f64, 0.0f64);
+        let inv_n = 1.0 / n as f32;
+        for i in 0..n {
+            let p = net::softmax(&logits[i]);
+            let logp = net::log_softmax(&logits[i]);
+            let h: f32 = -(0..3).map(|j| p[j] * logp[j]).sum::<f32>();
+            entropy_sum += h as f64;
+            let a = actions[i];
+            // Policy term: imitation = cross-entropy to the teacher's action (weight 1);
+            // A2C = −A·log π(a|s) (eq. 2). Both have gradient w·(π − onehot(a)).
+            let w = if imitation { 1.0 } else { adv[i] };
+            for j in 0..3 {
+                let onehot = if j == a { 1.0 } else { 0.0 };
+                // Entropy bonus: d(−c·H)/dz_j = c·π_j·(log π_j + H).
+                let dent = hp.ent_coef * p[j] * (logp[j] + h);
+                dlogits[i * 3 + j] = (w * (p[j] - onehot) + dent) * inv_n;
+            }
+            let dv = v[i] - returns[i];
+            vloss_sum += 0.5 * (dv as f64) * (dv as f64);
+            dvalues[i] = hp.vf_coef * dv * inv_n;
+        }
+        grad.iter_mut().for_each(|g| *g = 0.0);
+        net.backward_batch(&mut cache, &dlogits, &dvalues, &mut grad);
+        let grad_norm = net::clip_global_norm(&mut grad, hp.max_grad_norm);
+        adam.step(&mut net.params, &grad);
+        done_updates = update;
+        bar.inc(1);
+        // 4. Log and checkpoint.
+        if update % hp.log_every == 0 || update == hp.updates {
+            let wall = t0.elapsed().as_secs_f64();
+            let row = summarise(
+                &window,
+                update,
+                env_steps,
+                episodes,
+                wall,
+                if imitation { "imitation" } else { "a2c" },
+                entropy_sum / n as f64,
+                vloss_sum / n as f64,
+                grad_norm as f64,
+            );
+            bar.set_message(format!(
+                "{} eps, {:.0} steps/s, return {:+.3}, recognition {:.3}, cost {:.3}, entropy {:.3}",
+                row.episodes,
+                row.steps_per_s,
+                row.mean_return,
+                row.recognition,
+                row.cost,
+                row.policy_entropy
+            ));
+            if !opts.progress {
+                eprintln!("{}", row_line(&row));
+            }
+            csv.push_str(&csv_line(&row));
+            log.push(row);
+            window.clear();
+            if let Some(dir) = &opts.out {
+                std::fs::write(dir.join("log.csv"), &csv)
+                    .with_context(|| format!("cannot write {}", dir.display()))?;
+            }
+        }
+        if let Some(dir) = &opts.out {
+            if update % hp.checkpoint_every == 0 {
+                let meta = metadata(hp, opts, update, env_steps, t0.elapsed().as_secs_f64());
+                file::save(dir.join("checkpoint.policy"), &net, &meta)?;
+            }
+        }
+    }
+    bar.finish_and_clear();
+    let wall_s = t0.elapsed().as_secs_f64();
+    if let Some(dir) = &opts.out {
+        let meta = metadata(hp, opts, done_updates, env_steps, wall_s);
+        file::save(dir.join("policy.policy"), &net, &meta)?;
+        std::fs::write(
+            dir.join("log.json"),
+            serde_json::to_string_pretty(&log).context("serialising the log")?,
+        )?;
+        std::fs::write(dir.join("curve.svg"), curve_svg(&log, hp))?;
+    }
+    Ok(TrainOutcome {
+        net,
+        log,
+        wall_s,
+        updates: done_updates,
+    })
+}
+
+/// The policy file's metadata: everything needed to reproduce and judge the run.
+fn metadata(
+    hp: &HyperParams,
+    opts: &RunOptions,
+    updates: u64,
+    env_steps: u64,
+    wall_s: f64,
+) -> serde_json::Value {
+    serde_json::json!({
+        "command": opts.command,
+        "hyper_params": hp,
+        "updates_done": updates,
+        "env_steps": env_steps,
+        "wall_s": wall_s,
+        "threads": rayon::current_num_threads(),
+        "architecture": net::ARCH_NAME,
+    })
+}
+
+/// Generalised advantage estimation (eq. 4) over a `[t][env]` segment; `dones[i]` marks
+/// a step that ended its episode (no bootstrap across it).
+#[allow(clippy::too_many_arguments)]
+pub fn gae(
+    rewards: &[f32],
+    values: &[f32],
+    dones: &[bool],
+    next_values: &[f32],
+    envs: usize,
+    t_len: usize,
+    gamma: f32,
+    lambda: f32,
+) -> (Vec<f32>, Vec<f32>) {
+    let mut adv = vec![0.0f32; rewards.len()];
+    for e in 0..envs {
+        let mut last = 0.0f32;
+        for t in (0..t_len).rev() {
+            let i = t * envs + e;
+            let next_v = if t + 1 < t_len {
+                values[(t + 1) * envs + e]
+            } else {
+                next_values[e]
+            };
+            let live = if dones[i] { 0.0 } else { 1.0 };
+            let delta = rewards[i] + gamma * next_v * live - values[i];
+            last = delta + gamma * lambda * live * last;
+            adv[i] = last;
+        }
+    }
+    let returns = adv.iter().zip(values).map(|(a, v)| a + v).collect();
+    (adv, returns)
+}
+
+fn normalise(x: &mut [f32]) {
+    let n = x.len().max(1) as f32;
+    let mean = x.iter().sum::<f32>() / n;
+    let var = x.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / n;
+    let sd = var.sqrt() + 1e-8;
+    x.iter_mut().for_each(|v| *v = (*v - mean) / sd);
+}
+
+#[allow(clippy::too_many_arguments)]
+fn summarise(
+    w: &[Finished],
+    update: u64,
+    env_steps: u64,
+    episodes: u64,
+    wall_s: f64,
+    phase: &str,
+    policy_entropy: f64,
+    value_loss: f64,
+    grad_norm: f64,
+) -> LogRow {
+    let k = w.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&Finished) -> f64| w.iter().map(f).sum::<f64>() / k;
+    let errs: Vec<f64> = w
+        .iter()
+        .filter_map(|f| f.pose_error.map(f64::from))
+        .collect();
+    LogRow {
+        update,
+        env_steps,
+        episodes,
+        wall_s,
+        phase: phase.to_string(),
+        mean_return: mean(&|f| f.ret as f64),
+        recognition: mean(&|f| f.success as u8 as f64),
+        measurements: mean(&|f| f.measurements as f64),
+        rotations: mean(&|f| f.rotations as f64),
+        cost: mean(&|f| f.cost as f64),
+        pose_error: (!errs.is_empty()).then(|| errs.iter().sum::<f64>() / errs.len() as f64),
+        policy_entropy,
+        value_loss,
+        grad_norm,
+        steps_per_s: env_steps as f64 / wall_s.max(1e-9),
+    }
+}
+
+const CSV_HEADER: &str = "update,env_steps,episodes,wall_s,phase,mean_return,recognition,measurements,rotations,cost,pose_error,policy_entropy,value_loss,grad_norm,steps_per_s\n";
+
+fn csv_line(r: &LogRow) -> String {
+    format!(
+        "{},{},{},{:.1},{},{:.4},{:.4},{:.3},{:.3},{:.4},{},{:.4},{:.5},{:.4},{:.1}\n",
+        r.update,
+        r.env_steps,
+        r.episodes,
+        r.wall_s,
+        r.phase,
+        r.mean_return,
+        r.recognition,
+        r.measurements,
+        r.rotations,
+        r.cost,
+        r.pose_error.map(|e| format!("{e:.4}")).unwrap_or_default(),
+        r.policy_entropy,
+        r.value_loss,
+        r.grad_norm,
+        r.steps_per_s
+    )
+}
+
+fn row_line(r: &LogRow) -> String {
+    format!(
+        "update {:>6} [{}] steps {:>9} eps {:>7} return {:+.3} recognition {:.3} meas {:.2} rot {:.2} cost {:.3} entropy {:.3} vloss {:.4} ({:.0} steps/s)",
+        r.update, r.phase, r.env_steps, r.episodes, r.mean_return, r.recognition,
+        r.measurements, r.rotations, r.cost, r.policy_entropy, r.value_loss, r.steps_per_s
+    )
+}
+
+fn progress_bar(show: bool, updates: u64) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let b = ProgressBar::new(updates);
+    b.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} updates {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    b
+}
+
+/// The learning curve: mean return, recognition and cost against environment steps.
+pub fn curve_svg(log: &[LogRow], hp: &HyperParams) -> String {
+    const W: f64 = 520.0;
+    const H: f64 = 160.0;
+    const LEFT: f64 = 70.0;
+    const TOP: f64 = 50.0;
+    const GAP: f64 = 60.0;
+    let panels: [(&str, fn(&LogRow) -> f64); 3] = [
+        ("mean return", |r| r.mean_return),
+        ("recognition (coarse success)", |r| r.recognition),
+        ("action cost per episode", |r| r.cost),
+    ];
+    let xmax = log
+        .last()
+        .map(|r| r.env_steps as f64)
+        .unwrap_or(1.0)
+        .max(1.0);
+    let total_h = TOP + 3.0 * (H + GAP) + 20.0;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{:.0}" height="{total_h:.0}" font-family="sans-serif" font-size="12">"#,
+        LEFT + W + 40.0
+    );
+    let _ = writeln!(
+        s,
+        r#"<text x="{LEFT}" y="24" font-size="15" font-weight="bold">Learning curve: K = {}, seed {}, {} envs × {} steps per update</text>"#,
+        hp.rot_bins, hp.seed, hp.num_envs, hp.segment_len
+    );
+    for (pi, (title, f)) in panels.iter().enumerate() {
+        let y0 = TOP + pi as f64 * (H + GAP);
+        let ys: Vec<f64> = log.iter().map(f).collect();
+        let (mut lo, mut hi) = ys
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &y| {
+                (a.min(y), b.max(y))
+            });
+        if !lo.is_finite() {
+            (lo, hi) = (0.0, 1.0);
+        }
+        if hi - lo < 1e-6 {
+            hi = lo + 1.0;
+        }
+        let px = |x: f64| LEFT + x / xmax * W;
+        let py = |y: f64| y0 + H - (y - lo) / (hi - lo) * H;
+        let _ = writeln!(
+            s,
+            r##"<rect x="{LEFT}" y="{y0}" width="{W}" height="{H}" fill="none" stroke="#444"/><text x="{LEFT}" y="{:.1}" font-weight="bold">{title}</text>"##,
+            y0 - 8.0
+        );
+        for k in 0..=4 {
+            let v = lo + (hi - lo) * k as f64 / 4.0;
+            let _ = writeln!(
+                s,
+                r##"<line x1="{LEFT}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end" font-size="10">{v:.3}</text>"##,
+                LEFT + W,
+                LEFT - 5.0,
+                py(v) + 3.0,
+                y = py(v)
+            );
+        }
+        // Imitation phase shaded.
+        if let Some(last_im) = log.iter().rev().find(|r| r.phase == "imitation") {
+            let _ = writeln!(
+                s,
+                r##"<rect x="{LEFT}" y="{y0}" width="{:.1}" height="{H}" fill="#f2e6ff" opacity="0.6"/>"##,
+                px(last_im.env_steps as f64) - LEFT
+            );
+        }
+        let pts: Vec<String> = log
+            .iter()
+            .map(|r| format!("{:.1},{:.1}", px(r.env_steps as f64), py(f(r))))
+            .collect();
+        let _ = writeln!(
+            s,
+            r##"<polyline points="{}" fill="none" stroke="#1b6ac9" stroke-width="1.5"/>"##,
+            pts.join(" ")
+        );
+        let _ = writeln!(
+            s,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="end" font-size="10">environment steps (max {xmax:.0}); shaded: imitation warm start</text>"#,
+            LEFT + W,
+            y0 + H + 16.0
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// Writes `text` to `path`, creating parent directories.
+pub fn write_text(path: &Path, text: &str) -> Result<()> {
+    if let Some(p) = path.parent() {
+        std::fs::create_dir_all(p)?;
+    }
+    let mut f =
+        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?;
+    f.write_all(text.as_bytes())?;
+    Ok(())
+}
