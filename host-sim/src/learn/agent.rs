@@ -152,8 +152,9 @@ pub struct Policies(Vec<LearntPolicy>);
 
 impl Policies {
     /// Loads a policy for every setting in `rot_bins`: from `given` (files whose header
-    /// says which K they are for; two files for one K is an error), else the committed
-    /// [`default_policy_path`]. Every error names the file and what is wrong.
+    /// says which K they are for; two files for one K is an error, and so is a setting no
+    /// given file covers), or, when nothing is given, the committed
+    /// [`default_policy_path`]s. Every error names the file and what is wrong.
     pub fn load(given: &[PathBuf], rot_bins: &[u8]) -> anyhow::Result<Self> {
         let mut by_k: Vec<(u8, PathBuf)> = Vec::new();
         for path in given {
@@ -170,11 +171,17 @@ impl Policies {
         }
         let mut out = Vec::new();
         for &k in rot_bins {
-            let path = by_k
-                .iter()
-                .find(|(kk, _)| *kk == k)
-                .map(|(_, p)| p.clone())
-                .unwrap_or_else(|| default_policy_path(k));
+            let path = match by_k.iter().find(|(kk, _)| *kk == k) {
+                Some((_, p)) => p.clone(),
+                None if given.is_empty() => default_policy_path(k),
+                None => {
+                    let have: Vec<String> = by_k.iter().map(|(kk, _)| kk.to_string()).collect();
+                    anyhow::bail!(
+                        "--rot-bins {k} needs a policy trained for K = {k}, but the --policy file(s) given are for K = {}",
+                        have.join(", ")
+                    );
+                }
+            };
             out.push(LearntPolicy::load(&path, k).map_err(|e| {
                 anyhow::anyhow!("{e} (the learnt agent with --rot-bins {k} needs a policy for K = {k}; train one with `activesense train --rot-bins {k}` or pass --policy FILE)")
             })?);
@@ -208,4 +215,58 @@ pub fn run_agent_episode(
         .for_rot_bins(spec.rot_bins)
         .ok_or_else(|| anyhow::anyhow!("no learnt policy loaded for K = {}", spec.rot_bins))?;
     Ok(crate::episode::run_episode_with(spec, &mut p.agent()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn policy_sets_reject_what_does_not_fit() {
+        let dir = std::env::temp_dir().join(format!("activesense-policies-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let k1 = dir.join("k1.policy");
+        file::save(
+            &k1,
+            &PolicyNet::new(shape_for(1), 3),
+            &serde_json::json!({}),
+        )
+        .unwrap();
+        // The right K loads; the wrong K is refused with both numbers named.
+        let ok = Policies::load(std::slice::from_ref(&k1), &[1]).unwrap();
+        assert_eq!(ok.for_rot_bins(1).unwrap().net.shape.rot_bins, 1);
+        let e = Policies::load(std::slice::from_ref(&k1), &[10])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("K = 10") && e.contains("K = 1"), "{e}");
+        // Two files for one K.
+        let e = Policies::load(&[k1.clone(), k1.clone()], &[1])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("two policies"), "{e}");
+        // A corrupt file: the message names it and says why.
+        let bad = dir.join("bad.policy");
+        let mut bytes = std::fs::read(&k1).unwrap();
+        let last = bytes.len() - 10;
+        bytes[last] ^= 0x40;
+        std::fs::write(&bad, &bytes).unwrap();
+        let e = Policies::load(std::slice::from_ref(&bad), &[1])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bad.policy") && e.contains("checksum"), "{e}");
+        // Not a policy at all.
+        std::fs::write(&bad, b"hello").unwrap();
+        let e = Policies::load(std::slice::from_ref(&bad), &[1])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bad.policy"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn greedy_agent_takes_the_argmax() {
+        assert_eq!(argmax(&[0.1, 0.3, 0.2]), 1);
+        assert_eq!(argmax(&[0.5, 0.5, 0.2]), 0);
+        assert_eq!(ACTIONS[action_index(Action::Measure)], Action::Measure);
+    }
 }
