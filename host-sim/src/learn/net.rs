@@ -1,15 +1,19 @@
 //! The actor-critic policy network (paper Fig. 2, after Chaplot et al. 2018), sized for a
-//! Cortex-M4: architecture id 1, `"conv8-16-fc64"`. Forward and backward are written by hand
+//! Cortex-M4: architecture id 2, `"conv8-4-fc64"`. Forward and backward are written by hand
 //! in f32 so training needs no framework, runs on two CPU cores, and is bit-reproducible.
 //!
 //! ```text
-//! belief K×30×30 ─ conv1 3×3/2 K→8 ─ ReLU ─ conv2 3×3/2 8→16 ─ ReLU ─ flatten 1024
-//!                  (8×15×15)                (16×8×8)                     │
-//!                                                   fc_belief 1024→64 ─ ReLU ─┐
+//! belief K×30×30 ─ conv1 3×3/2 K→8 ─ ReLU ─ conv2 3×3/2 8→4 ─ ReLU ─ flatten 256
+//!                  (8×15×15)                (4×8×8)                     │
+//!                                                   fc_belief 256→64 ─ ReLU ─┐
 //! side S ────────────────────────────────────────── fc_side   S→64    ─ ReLU ─┴ concat 128
 //!   ─ fc_joint 128→64 ─ ReLU ─┬─ actor  64→3 logits (0 rotate-left, 1 rotate-right, 2 measure)
 //!                             └─ critic 64→1 value
 //! ```
+//!
+//! Why 4 channels after conv2 (architecture 1 had 16 and a 1024→64 fc_belief, 83 K
+//! parameters): the int8 policy must fit a RAM slot on the instrument so a user can upload
+//! a new one without reflashing; 33 K parameters make a ≈ 34 KB blob.
 //!
 //! Both convolutions use zero padding 1. Inputs: the belief map is `K` planes of 30×30,
 //! layout `[plane][y][x]` row-major, values in `[0, 1]`; the side features are `S` floats.
@@ -31,9 +35,9 @@ use rayon::prelude::*;
 use std::ops::Range;
 
 /// Architecture id written in policy files.
-pub const ARCH_ID: u16 = 1;
+pub const ARCH_ID: u16 = 2;
 /// Human-readable architecture name.
-pub const ARCH_NAME: &str = "conv8-16-fc64";
+pub const ARCH_NAME: &str = "conv8-4-fc64";
 /// Side of the square belief map (cells).
 pub const GRID: usize = 30;
 /// Largest supported number of rotation bins `K` (belief planes).
@@ -51,7 +55,7 @@ pub const CONV_STRIDE: usize = 2;
 pub const CONV_PAD: usize = 1;
 
 const C1: usize = 8;
-const C2: usize = 16;
+const C2: usize = 4;
 const S1: usize = 15; // conv1 output side: (30 + 2 - 3) / 2 + 1
 const S2: usize = 8; // conv2 output side: (15 + 2 - 3) / 2 + 1
 const P0: usize = GRID * GRID;
@@ -1122,10 +1126,10 @@ mod tests {
             rot_bins: 1,
             side: 108,
         };
-        assert_eq!(k1.param_count(), 82_340);
-        assert_eq!(REAL.param_count(), 82_988);
-        assert_eq!(k1.macs(), 170_824);
-        assert_eq!(REAL.macs(), 316_624);
+        assert_eq!(k1.param_count(), 32_312);
+        assert_eq!(REAL.param_count(), 32_960);
+        assert_eq!(k1.macs(), 66_376);
+        assert_eq!(REAL.macs(), 212_176);
         let names: Vec<_> = REAL.layers().iter().map(|l| l.name).collect();
         assert_eq!(
             names,
