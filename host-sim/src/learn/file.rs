@@ -8,7 +8,7 @@
 //! |-------:|-----:|-------|
 //! | 0 | 8 | magic `b"ASPOLICY"` |
 //! | 8 | 2 | format version, u16 = 1 |
-//! | 10 | 2 | architecture id, u16 = 2 (`conv8-4-fc64`, see [`super::net`]; 1 was `conv8-16-fc64`, no longer read) |
+//! | 10 | 2 | architecture id, u16 = 2 (`conv8-4-fc32`, see [`super::net`]; 1 was `conv8-16-fc64`, no longer read) |
 //! | 12 | 1 | rotation bins `K`, u8, `1..=10` |
 //! | 13 | 1 | reserved, 0 |
 //! | 14 | 2 | side-feature length `S`, u16 |

@@ -1,19 +1,20 @@
 //! The actor-critic policy network (paper Fig. 2, after Chaplot et al. 2018), sized for a
-//! Cortex-M4: architecture id 2, `"conv8-4-fc64"`. Forward and backward are written by hand
+//! Cortex-M4: architecture id 2, `"conv8-4-fc32"`. Forward and backward are written by hand
 //! in f32 so training needs no framework, runs on two CPU cores, and is bit-reproducible.
 //!
 //! ```text
 //! belief K×30×30 ─ conv1 3×3/2 K→8 ─ ReLU ─ conv2 3×3/2 8→4 ─ ReLU ─ flatten 256
 //!                  (8×15×15)                (4×8×8)                     │
-//!                                                   fc_belief 256→64 ─ ReLU ─┐
-//! side S ────────────────────────────────────────── fc_side   S→64    ─ ReLU ─┴ concat 128
-//!   ─ fc_joint 128→64 ─ ReLU ─┬─ actor  64→3 logits (0 rotate-left, 1 rotate-right, 2 measure)
-//!                             └─ critic 64→1 value
+//!                                                   fc_belief 256→32 ─ ReLU ─┐
+//! side S ────────────────────────────────────────── fc_side   S→32    ─ ReLU ─┴ concat 64
+//!   ─ fc_joint 64→32 ─ ReLU ─┬─ actor  32→3 logits (0 rotate-left, 1 rotate-right, 2 measure)
+//!                            └─ critic 32→1 value
 //! ```
 //!
-//! Why 4 channels after conv2 (architecture 1 had 16 and a 1024→64 fc_belief, 83 K
-//! parameters): the int8 policy must fit a RAM slot on the instrument so a user can upload
-//! a new one without reflashing; 33 K parameters make a ≈ 34 KB blob.
+//! Why so small (architecture 1 had 16 channels after conv2, a 1024→64 fc_belief and 64
+//! hidden units, 83 K parameters): the int8 policy must fit a RAM slot on the instrument,
+//! next to the localizer, so a user can upload a new one without reflashing; 15 K
+//! parameters make a ≈ 16 KB blob. `docs/LEARNING.md` has the measurements behind it.
 //!
 //! Both convolutions use zero padding 1. Inputs: the belief map is `K` planes of 30×30,
 //! layout `[plane][y][x]` row-major, values in `[0, 1]`; the side features are `S` floats.
@@ -37,7 +38,7 @@ use std::ops::Range;
 /// Architecture id written in policy files.
 pub const ARCH_ID: u16 = 2;
 /// Human-readable architecture name.
-pub const ARCH_NAME: &str = "conv8-4-fc64";
+pub const ARCH_NAME: &str = "conv8-4-fc32";
 /// Side of the square belief map (cells).
 pub const GRID: usize = 30;
 /// Largest supported number of rotation bins `K` (belief planes).
@@ -62,7 +63,7 @@ const P0: usize = GRID * GRID;
 const P1: usize = S1 * S1;
 const P2: usize = S2 * S2;
 const FLAT: usize = C2 * P2;
-const HIDDEN: usize = 64;
+const HIDDEN: usize = 32;
 const KK: usize = CONV_KERNEL * CONV_KERNEL;
 
 // One sample's kept activations (all post-ReLU), back to back: conv1 | conv2 | fc_belief |
@@ -1126,10 +1127,10 @@ mod tests {
             rot_bins: 1,
             side: 108,
         };
-        assert_eq!(k1.param_count(), 32_312);
-        assert_eq!(REAL.param_count(), 32_960);
-        assert_eq!(k1.macs(), 66_376);
-        assert_eq!(REAL.macs(), 212_176);
+        assert_eq!(k1.param_count(), 14_296);
+        assert_eq!(REAL.param_count(), 14_944);
+        assert_eq!(k1.macs(), 48_456);
+        assert_eq!(REAL.macs(), 194_256);
         let names: Vec<_> = REAL.layers().iter().map(|l| l.name).collect();
         assert_eq!(
             names,
@@ -1168,7 +1169,7 @@ mod tests {
                 .iter()
                 .fold(0.0f32, |m, x| m.max(x.abs()))
         };
-        assert!(max_abs(&layers[L_ACTOR]) < 0.01 * (3.0f32 / 64.0).sqrt());
+        assert!(max_abs(&layers[L_ACTOR]) < 0.01 * (3.0f32 / HIDDEN as f32).sqrt());
         assert!(max_abs(&layers[L_CRITIC]) > 0.1);
     }
 
