@@ -38,6 +38,8 @@ pub const MAGIC: [u8; 8] = *b"ASQPOLCY";
 pub const FORMAT_VERSION: u16 = 1;
 /// Architecture id of `conv8-16-fc64` (the float policy file's id too).
 pub const ARCH_CONV8_16_FC64: u16 = 1;
+/// Architecture id of `conv8-4-fc32` (the same graph, conv2 with 4 channels, 32 hidden).
+pub const ARCH_CONV8_4_FC32: u16 = 2;
 /// Layers in the architecture: conv1, conv2, fc_belief, fc_side, fc_joint, actor, critic.
 pub const N_LAYERS: usize = 7;
 /// Bytes of the fixed header.
@@ -109,6 +111,22 @@ pub enum BlobError {
     /// A scale, zero point, multiplier, shift or weight is out of its range, or two tensors
     /// that must share quantisation parameters do not.
     BadQuantization,
+}
+
+impl core::fmt::Display for BlobError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            BlobError::Truncated => f.write_str("truncated (shorter than its declared length)"),
+            BlobError::TrailingBytes => f.write_str("longer than its declared length"),
+            BlobError::BadMagic => f.write_str("not an int8 policy blob (bad magic)"),
+            BlobError::UnsupportedVersion(v) => write!(f, "unsupported blob format version {v}"),
+            BlobError::UnknownArchitecture(a) => write!(f, "unknown architecture id {a}"),
+            BlobError::ShapeMismatch => f.write_str("shapes do not fit the architecture"),
+            BlobError::BadChecksum => f.write_str("checksum mismatch (corrupt blob)"),
+            BlobError::BadTensorTable => f.write_str("bad tensor table"),
+            BlobError::BadQuantization => f.write_str("bad quantisation parameters"),
+        }
+    }
 }
 
 /// Why one inference could not run (the blob itself is always valid here).
@@ -184,8 +202,19 @@ impl LayerDims {
     }
 }
 
-/// The layer dimensions of `conv8-16-fc64` for `K` belief planes, in table order.
-pub const fn layer_dims(rot_bins: usize) -> [LayerDims; N_LAYERS] {
+/// The layer dimensions of architecture `arch` for `K` belief planes, in table order;
+/// `None` for an unknown architecture.
+pub const fn layer_dims(arch: u16, rot_bins: usize) -> Option<[LayerDims; N_LAYERS]> {
+    match arch {
+        ARCH_CONV8_16_FC64 => Some(graph(rot_bins, C2, HIDDEN)),
+        ARCH_CONV8_4_FC32 => Some(graph(rot_bins, 4, 32)),
+        _ => None,
+    }
+}
+
+/// The shared graph with `c2` conv2 channels and `hidden` units per hidden layer (the
+/// largest, architecture 1, sizes [`Scratch`]).
+const fn graph(rot_bins: usize, c2: usize, hidden: usize) -> [LayerDims; N_LAYERS] {
     const fn conv(inputs: usize, outputs: usize, in_size: usize, out_size: usize) -> LayerDims {
         LayerDims {
             kind: LayerKind::Conv,
@@ -208,12 +237,12 @@ pub const fn layer_dims(rot_bins: usize) -> [LayerDims; N_LAYERS] {
     }
     [
         conv(rot_bins, C1, BELIEF_SIDE, S1),
-        conv(C1, C2, S1, S2),
-        fc(FLAT, HIDDEN, true),
-        fc(SIDE_FEATURES, HIDDEN, true),
-        fc(2 * HIDDEN, HIDDEN, true),
-        fc(HIDDEN, 3, false),
-        fc(HIDDEN, 1, false),
+        conv(C1, c2, S1, S2),
+        fc(c2 * S2 * S2, hidden, true),
+        fc(SIDE_FEATURES, hidden, true),
+        fc(2 * hidden, hidden, true),
+        fc(hidden, 3, false),
+        fc(hidden, 1, false),
     ]
 }
 
@@ -308,6 +337,7 @@ impl Default for Scratch {
 #[derive(Clone, Copy, Debug)]
 pub struct QuantizedPolicy<'a> {
     bytes: &'a [u8],
+    arch: u16,
     rot_bins: u8,
     belief_input: QuantParams,
     side_input: QuantParams,
@@ -407,9 +437,9 @@ impl<'a> QuantizedPolicy<'a> {
             return Err(BlobError::BadChecksum);
         }
         let arch = rd_u16(b, 10)?;
-        if arch != ARCH_CONV8_16_FC64 {
+        let Some(dims) = layer_dims(arch, 1) else {
             return Err(BlobError::UnknownArchitecture(arch));
-        }
+        };
         let rot_bins = field::<1>(b, 12)?[0];
         let n_layers = field::<1>(b, 13)?[0] as usize;
         let side_len = rd_u16(b, 14)? as usize;
@@ -429,7 +459,7 @@ impl<'a> QuantizedPolicy<'a> {
         int8_zero_point(&belief_input)?;
         int8_zero_point(&side_input)?;
 
-        let dims = layer_dims(rot_bins as usize);
+        let dims = layer_dims(arch, rot_bins as usize).unwrap_or(dims);
         let mut layers = [LayerView {
             dims: dims[0],
             input: belief_input,
@@ -518,6 +548,7 @@ impl<'a> QuantizedPolicy<'a> {
         }
         Ok(QuantizedPolicy {
             bytes,
+            arch,
             rot_bins,
             belief_input,
             side_input,
@@ -528,6 +559,11 @@ impl<'a> QuantizedPolicy<'a> {
     /// The blob this view reads.
     pub fn bytes(&self) -> &'a [u8] {
         self.bytes
+    }
+
+    /// Architecture id.
+    pub fn arch(&self) -> u16 {
+        self.arch
     }
 
     /// Belief planes `K` the network was trained for.
@@ -618,9 +654,16 @@ impl<'a> QuantizedPolicy<'a> {
     ) -> Result<Decision, RunError> {
         let l = &self.layers;
         let Activations { a1, a2, cat, joint } = acts;
+        // Architecture 2 uses a prefix of each buffer (sized for architecture 1).
+        let len = |i: usize| l[i].dims.output_len();
+        let a1 = a1.get_mut(..len(L_CONV1)).ok_or(RunError::BadInput)?;
+        let a2 = a2.get_mut(..len(L_CONV2)).ok_or(RunError::BadInput)?;
+        let h = len(L_BELIEF);
+        let cat = cat.get_mut(..2 * h).ok_or(RunError::BadInput)?;
+        let joint = joint.get_mut(..len(L_JOINT)).ok_or(RunError::BadInput)?;
         conv3x3_s2_p1(&l[L_CONV1], belief, a1);
         conv3x3_s2_p1(&l[L_CONV2], a1, a2);
-        let (hb, hs) = cat.split_at_mut(HIDDEN);
+        let (hb, hs) = cat.split_at_mut(h);
         fully_connected_i8(&l[L_BELIEF], a2, hb);
         fully_connected_i8(&l[L_SIDE], side, hs);
         fully_connected_i8(&l[L_JOINT], cat, joint);
@@ -831,9 +874,11 @@ pub struct LayerTensors<'t> {
     pub output: QuantParams,
 }
 
-/// Bytes of the blob for `K` belief planes.
-pub const fn blob_len(rot_bins: usize) -> usize {
-    let dims = layer_dims(rot_bins);
+/// Bytes of the blob of architecture `arch` for `K` belief planes (0 for an unknown one).
+pub const fn blob_len(arch: u16, rot_bins: usize) -> usize {
+    let Some(dims) = layer_dims(arch, rot_bins) else {
+        return 0;
+    };
     let mut n = TABLE_END + CRC_LEN;
     let mut i = 0;
     while i < N_LAYERS {
@@ -850,6 +895,7 @@ pub const fn blob_len(rot_bins: usize) -> usize {
 /// checked when the result is parsed.
 pub fn write_blob(
     out: &mut [u8],
+    arch: u16,
     rot_bins: u8,
     belief_input: QuantParams,
     side_input: QuantParams,
@@ -858,13 +904,13 @@ pub fn write_blob(
     if !(1..=MAX_ROT_BINS).contains(&(rot_bins as usize)) {
         return Err(BlobError::ShapeMismatch);
     }
-    let dims = layer_dims(rot_bins as usize);
-    let total = blob_len(rot_bins as usize);
+    let dims = layer_dims(arch, rot_bins as usize).ok_or(BlobError::UnknownArchitecture(arch))?;
+    let total = blob_len(arch, rot_bins as usize);
     let out = out.get_mut(..total).ok_or(BlobError::Truncated)?;
     out.fill(0);
     put(out, 0, &MAGIC);
     put(out, 8, &FORMAT_VERSION.to_le_bytes());
-    put(out, 10, &ARCH_CONV8_16_FC64.to_le_bytes());
+    put(out, 10, &arch.to_le_bytes());
     put(out, 12, &[rot_bins, N_LAYERS as u8]);
     put(out, 14, &(BELIEF_SIDE as u16).to_le_bytes());
     put(out, 16, &(SIDE_FEATURES as u16).to_le_bytes());
@@ -952,6 +998,16 @@ mod tests {
     }
 
     fn build(k: u8, belief: QuantParams, side: QuantParams, layers: &[Owned]) -> Vec<u8> {
+        build_arch(ARCH_CONV8_16_FC64, k, belief, side, layers)
+    }
+
+    fn build_arch(
+        arch: u16,
+        k: u8,
+        belief: QuantParams,
+        side: QuantParams,
+        layers: &[Owned],
+    ) -> Vec<u8> {
         let t: Vec<LayerTensors<'_>> = layers
             .iter()
             .map(|l| LayerTensors {
@@ -964,8 +1020,8 @@ mod tests {
             })
             .collect();
         let t: [LayerTensors<'_>; N_LAYERS] = t.try_into().ok().unwrap();
-        let mut out = vec![0u8; blob_len(k as usize)];
-        let n = write_blob(&mut out, k, belief, side, &t).unwrap();
+        let mut out = vec![0u8; blob_len(arch, k as usize)];
+        let n = write_blob(&mut out, arch, k, belief, side, &t).unwrap();
         assert_eq!(n, out.len());
         out
     }
@@ -977,7 +1033,12 @@ mod tests {
 
     /// All-zero layers with multiplier 1.0 (Q31 2^30, shift 1) and unit quantisation.
     fn zero_layers(k: u8) -> Vec<Owned> {
-        layer_dims(k as usize)
+        zero_layers_arch(ARCH_CONV8_16_FC64, k)
+    }
+
+    fn zero_layers_arch(arch: u16, k: u8) -> Vec<Owned> {
+        layer_dims(arch, k as usize)
+            .unwrap()
             .iter()
             .map(|d| Owned {
                 weights: vec![0; d.weight_len()],
@@ -1209,7 +1270,19 @@ mod tests {
         let blob = random_blob(1);
         let p = QuantizedPolicy::parse(&blob).unwrap();
         assert_eq!(p.rot_bins(), 1);
-        assert_eq!(blob.len(), blob_len(1));
+        assert_eq!(blob.len(), blob_len(ARCH_CONV8_16_FC64, 1));
+        // Architecture 2 (the smaller graph) runs in a prefix of the same scratch.
+        let mut l = zero_layers_arch(ARCH_CONV8_4_FC32, 10);
+        l[L_ACTOR].bias[2] = 1;
+        let small = build_arch(ARCH_CONV8_4_FC32, 10, UNIT, UNIT, &l);
+        let p2 = QuantizedPolicy::parse(&small).unwrap();
+        assert_eq!((p2.arch(), p2.rot_bins()), (ARCH_CONV8_4_FC32, 10));
+        let d = p2.infer(&[0; 9000], &[0; SIDE_FEATURES], &mut Scratch::new());
+        assert_eq!(d.unwrap().action, Action::Measure);
+        assert_eq!(
+            QuantizedPolicy::parse(&small[..small.len() - 1]).err(),
+            Some(BlobError::Truncated)
+        );
         let mut s = Scratch::new();
         let belief = [-128i8; 900];
         let side = [3i8; SIDE_FEATURES];
