@@ -375,7 +375,7 @@ fn cmd_bench_registration(a: BenchRegistrationArgs) -> Result<()> {
 
 fn cmd_policy_quantize(a: QuantizeArgs) -> Result<()> {
     use activesense_sim::learn::{file, quantize};
-    let (net, _) = file::load(&a.policy)?;
+    let (net, _) = file::load(&a.policy).map_err(|e| anyhow::anyhow!("{e}"))?;
     let (blob, r) = quantize::quantize_calibrated(&net, a.calibration_episodes, a.seed);
     std::fs::write(&a.out, &blob).with_context(|| format!("cannot write {}", a.out.display()))?;
     println!(
