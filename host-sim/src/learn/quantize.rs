@@ -318,7 +318,7 @@ pub fn calibration_states(
 /// TFLite's `QuantizeMultiplier`: `m ≈ q · 2^(shift − 31)` with `q` in `[2³⁰, 2³¹)`
 /// (or 0 for `m = 0`), the shift clamped to the core's `−31..=30`.
 pub fn quantize_multiplier(m: f64) -> (i32, i8) {
-    if !(m > 0.0) || !m.is_finite() {
+    if m.is_nan() || m <= 0.0 || !m.is_finite() {
         return (0, 0);
     }
     // frexp: m = frac · 2^exp, frac in [0.5, 1).
@@ -350,7 +350,7 @@ pub fn quantize_multiplier(m: f64) -> (i32, i8) {
 pub fn activation_params(r: Range) -> QuantParams {
     let lo = r.min.min(0.0) as f64;
     let mut hi = r.max.max(0.0) as f64;
-    if !(hi - lo > 1e-6) {
+    if (hi - lo).is_nan() || hi - lo <= 1e-6 {
         hi = lo + 1e-6;
     }
     let scale = ((hi - lo) / 255.0) as f32;
