@@ -26,6 +26,7 @@
 //! | [`pipeline`] | Fig. 1, 3.1–3.3 (one episode's chain: localize, terminate, refine) |
 //! | [`policy`] | 3.1, Fig. 2 (the policy seam: `PolicyInput`, state features, `Policy`) |
 //! | [`runner`] | Fig. 1 (the one episode loop every side drives: `EpisodeRunner`) |
+//! | [`quantized`] | 3.1 on the instrument (int8 policy blob, integer-only inference, `QuantizedAgent`) |
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -40,6 +41,7 @@ pub mod math;
 pub mod pipeline;
 pub mod policy;
 pub mod pose_distance;
+pub mod quantized;
 pub mod registration;
 pub mod runner;
 pub mod session;

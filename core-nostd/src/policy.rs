@@ -131,6 +131,22 @@ impl PolicyInput<'_> {
     /// zero-padded), as probability over the largest probability. Returns the values
     /// written (`belief_len()`), or 0 when `out` is too short or the localizer not ready.
     pub fn write_belief(&self, out: &mut [f32]) -> usize {
+        self.fill_belief(out, 0.0, |v| v)
+    }
+
+    /// The belief map of [`PolicyInput::write_belief`], each value quantised on the way
+    /// with [`crate::quantized::quantize_value`] (`scale`, `zero_point`): exactly the
+    /// quantisation of the float map, without a `K × 900` float buffer (36 KB at K = 10,
+    /// too much for the instrument). Returns the values written, or 0 as `write_belief`.
+    pub fn write_belief_q(&self, out: &mut [i8], scale: f32, zero_point: i32) -> usize {
+        let p = crate::quantized::QuantParams { scale, zero_point };
+        let q = |v| crate::quantized::quantize_value(v, p);
+        self.fill_belief(out, q(0.0), q)
+    }
+
+    /// The one belief extraction both writers share: `map(probability / peak)` per cell,
+    /// `blank` outside the grid.
+    fn fill_belief<T: Copy>(&self, out: &mut [T], blank: T, map: impl Fn(f32) -> T) -> usize {
         let loc = self.localizer;
         let n = self.belief_len();
         if !loc.is_ready() || out.len() < n {
@@ -143,12 +159,12 @@ impl PolicyInput<'_> {
             peak = peak.max(loc.prob(i));
         }
         let scale = if peak > 0.0 { 1.0 / peak } else { 0.0 };
-        out[..n].iter_mut().for_each(|v| *v = 0.0);
+        out[..n].iter_mut().for_each(|v| *v = blank);
         for bin in 0..g.rot_bins as usize {
             for y in 0..ny.min(BELIEF_SIDE) {
                 for x in 0..nx.min(BELIEF_SIDE) {
                     let i = (bin * ny + y) * nx + x;
-                    out[bin * BELIEF_PLANE + y * BELIEF_SIDE + x] = loc.prob(i) * scale;
+                    out[bin * BELIEF_PLANE + y * BELIEF_SIDE + x] = map(loc.prob(i) * scale);
                 }
             }
         }

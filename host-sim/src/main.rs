@@ -51,6 +51,62 @@ enum Command {
     BenchRegistration(BenchRegistrationArgs),
     /// Benchmark the GHT localizer against the classical grid localizer (cost, memory, recognition).
     BenchLocalization(BenchLocalizationArgs),
+    /// The int8 policy for the instrument: quantise a float policy into a blob
+    /// (docs/policy-blob.md), or measure how often the int8 policy acts as the float one.
+    #[command(subcommand)]
+    Policy(PolicyCommand),
+}
+
+#[derive(Subcommand)]
+enum PolicyCommand {
+    /// Post-training int8 quantisation of a float policy file, calibrated on greedy episodes
+    /// on training plans; writes the blob the firmware runs.
+    Quantize(QuantizeArgs),
+    /// Float vs int8 on the test plans: argmax agreement per state and whole-episode
+    /// outcomes of each; prints a table, writes JSON.
+    Agreement(AgreementArgs),
+}
+
+#[derive(Args)]
+struct QuantizeArgs {
+    /// Float policy file (activesense train output).
+    #[arg(long)]
+    policy: PathBuf,
+    /// Where to write the int8 blob.
+    #[arg(long)]
+    out: PathBuf,
+    /// Greedy episodes on training plans whose states calibrate the activation ranges.
+    #[arg(long, default_value_t = activesense_sim::learn::quantize::DEFAULT_CALIBRATION_EPISODES)]
+    calibration_episodes: usize,
+    /// Seed of the calibration plans and placements.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+#[derive(Args)]
+struct AgreementArgs {
+    /// Comma-separated rotation settings.
+    #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
+    rot_bins: Vec<u8>,
+    /// Test plans per setting (seeds from 1000000 on).
+    #[arg(long, default_value_t = 200)]
+    plans: usize,
+    /// Float policy file(s), each for the K its header names; default: the committed
+    /// policies/k{K}/policy.policy.
+    #[arg(long)]
+    policy: Vec<PathBuf>,
+    /// int8 blob(s) to check, each for the K it names; default: quantised on the fly.
+    #[arg(long)]
+    int8: Vec<PathBuf>,
+    /// Calibration episodes when quantising on the fly.
+    #[arg(long, default_value_t = activesense_sim::learn::quantize::DEFAULT_CALIBRATION_EPISODES)]
+    calibration_episodes: usize,
+    /// Calibration seed when quantising on the fly.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Write the report as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -286,6 +342,8 @@ fn main() -> ExitCode {
         Command::Sim(a) => activesense_sim::remote::cmd_sim(a),
         Command::Serial(a) => activesense_sim::remote::cmd_serial(a),
         Command::McuBench(a) => activesense_sim::remote::cmd_mcu_bench(a),
+        Command::Policy(PolicyCommand::Quantize(a)) => cmd_policy_quantize(a),
+        Command::Policy(PolicyCommand::Agreement(a)) => cmd_policy_agreement(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -310,6 +368,81 @@ fn cmd_bench_registration(a: BenchRegistrationArgs) -> Result<()> {
     print!("{}", bench::summary(&report));
     if let Some(path) = &a.json {
         write_file(path, &serde_json::to_string_pretty(&report)?)?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn cmd_policy_quantize(a: QuantizeArgs) -> Result<()> {
+    use activesense_sim::learn::{file, quantize};
+    let (net, _) = file::load(&a.policy).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (blob, r) = quantize::quantize_calibrated(&net, a.calibration_episodes, a.seed);
+    std::fs::write(&a.out, &blob).with_context(|| format!("cannot write {}", a.out.display()))?;
+    println!(
+        "calibrated on {} states of {} training episodes (seed {}); wrote {} ({} bytes, K = {})",
+        r.states,
+        a.calibration_episodes,
+        a.seed,
+        a.out.display(),
+        blob.len(),
+        net.shape.rot_bins
+    );
+    Ok(())
+}
+
+/// Reads an int8 blob, naming the file in every error.
+fn read_blob(path: &Path) -> Result<(u8, Vec<u8>)> {
+    use activesense_core::quantized::QuantizedPolicy;
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read '{}'", path.display()))?;
+    let k = QuantizedPolicy::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("'{}' is not a usable int8 policy blob: {e}", path.display()))?
+        .rot_bins();
+    Ok((k, bytes))
+}
+
+fn cmd_policy_agreement(a: AgreementArgs) -> Result<()> {
+    use activesense_sim::learn::quantize;
+    let mut rot_bins = a.rot_bins.clone();
+    rot_bins.dedup();
+    let policies = Policies::load(&a.policy, &rot_bins)?;
+    let mut blobs = Vec::new();
+    for path in &a.int8 {
+        blobs.push((read_blob(path)?, path.clone()));
+    }
+    let mut reports = Vec::new();
+    println!("| K | plans | states | action agreement | identical episodes | success float / int8 | mean actions float / int8 | max logit error | blob |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for &k in &rot_bins {
+        let p = policies
+            .for_rot_bins(k)
+            .ok_or_else(|| anyhow::anyhow!("no float policy for K = {k}"))?;
+        let blob = match blobs.iter().find(|((bk, _), _)| *bk == k) {
+            Some(((_, b), _)) => b.clone(),
+            None => quantize::quantize_calibrated(&p.net, a.calibration_episodes, a.seed).0,
+        };
+        let r = quantize::agreement(&p.net, &blob, a.plans).map_err(|e| {
+            anyhow::anyhow!("int8 blob for K = {k} does not fit {}: {e}", p.describe())
+        })?;
+        println!(
+            "| {} | {} | {} | {:.4} | {} / {} | {:.3} / {:.3} | {:.1} / {:.1} | {:.4} | {} B, crc {:08x} |",
+            r.rot_bins,
+            r.plans,
+            r.states,
+            r.action_agreement,
+            r.identical_episodes,
+            r.plans,
+            r.float.success_rate,
+            r.int8.success_rate,
+            r.float.mean_actions,
+            r.int8.mean_actions,
+            r.max_logit_error,
+            r.blob_bytes,
+            r.blob_crc
+        );
+        reports.push(serde_json::json!({ "policy": p.describe(), "agreement": r }));
+    }
+    if let Some(path) = &a.json {
+        write_file(path, &serde_json::to_string_pretty(&reports)?)?;
         println!("wrote {}", path.display());
     }
     Ok(())
