@@ -95,6 +95,9 @@ pub enum AgentKind {
     /// The learnt actor-critic policy (§3.1); not a Table-3 baseline, so not in
     /// [`AgentKind::ALL`]. The host runs it from a policy file.
     Learnt,
+    /// The learnt policy quantised to int8 ([`crate::quantized`]): what the instrument
+    /// runs, and the host too, bit for bit.
+    LearntInt8,
 }
 
 impl AgentKind {
@@ -120,12 +123,13 @@ impl AgentKind {
             AgentKind::Heuristic2 => "heuristic-2",
             AgentKind::Heuristic3 => "heuristic-3",
             AgentKind::Learnt => "learnt",
+            AgentKind::LearntInt8 => "learnt-int8",
         }
     }
 
     /// True for the seven Table-3 baselines (which [`BaselineAgent`] plays).
     pub fn is_baseline(self) -> bool {
-        self != AgentKind::Learnt
+        !matches!(self, AgentKind::Learnt | AgentKind::LearntInt8)
     }
 
     /// Parses a paper name (`learnt` included).
@@ -133,7 +137,7 @@ impl AgentKind {
         AgentKind::ALL
             .iter()
             .copied()
-            .chain([AgentKind::Learnt])
+            .chain([AgentKind::Learnt, AgentKind::LearntInt8])
             .find(|a| a.name() == s)
     }
 
@@ -146,6 +150,7 @@ impl AgentKind {
     pub fn from_id(id: u8) -> Option<AgentKind> {
         match id {
             7 => Some(AgentKind::Learnt),
+            8 => Some(AgentKind::LearntInt8),
             _ => AgentKind::ALL.get(id as usize).copied(),
         }
     }

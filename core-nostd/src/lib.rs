@@ -14,6 +14,7 @@
 //! |---|---|
 //! | [`geometry`] | 3 (SE(2) conventions) |
 //! | [`floorplan`] | 3, 4.1 (the polygonal floor-plan model, ray casting, topological scan) |
+//! | [`builtin`] | 3.1 (the committed int8 policies the instrument carries) |
 //! | [`agents`] | 3.1, 4.2 (actions, costs, the Table-3 baseline agents) |
 //! | [`localization`] | 3.2 (fixed-grid GHT localization: R-table, Algorithms 1–2, belief analysis, staging) |
 //! | [`episode`] | 3.1, 4.2 (episode bookkeeping: encoder bearing, costs, action limit) |
@@ -32,6 +33,7 @@
 #![warn(missing_docs)]
 
 pub mod agents;
+pub mod builtin;
 pub mod episode;
 pub mod floorplan;
 pub mod geometry;

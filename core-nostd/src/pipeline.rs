@@ -304,6 +304,14 @@ impl Pipeline {
         }
     }
 
+    /// Lends the idle localizer's accumulator memory (see
+    /// [`GhtLocalizer::idle_storage`]); the pipeline needs [`Pipeline::start`] afterwards.
+    pub fn idle_storage(&mut self) -> &mut [u8] {
+        self.ready = false;
+        self.voted = false;
+        self.localizer.idle_storage()
+    }
+
     /// The localizer (belief, entropy, grid).
     pub fn localizer(&self) -> &GhtLocalizer {
         &self.localizer

@@ -89,7 +89,7 @@ const _: () = assert!((S1 + 2 - 3) / 2 + 1 == S2);
 const _: () = assert!(TABLE_END == 376);
 
 /// Why a blob was refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum BlobError {
     /// Shorter than its header or than the length it declares.
     Truncated,
@@ -415,6 +415,18 @@ impl<'a> QuantizedPolicy<'a> {
     /// Validates `bytes` (layout in `docs/policy-blob.md`) and returns a view that reads the
     /// tensors in place. Never panics.
     pub fn parse(bytes: &'a [u8]) -> Result<Self, BlobError> {
+        Self::parse_inner(bytes, true)
+    }
+
+    /// [`QuantizedPolicy::parse`] without the CRC-32 pass (every structural check stays, so
+    /// it still never panics): for bytes `parse` accepted before and that cannot have
+    /// changed since, such as the device's installed policy slot, re-viewed at every
+    /// decision. The CRC over a 16 KB blob costs about as much as a decision.
+    pub fn parse_verified(bytes: &'a [u8]) -> Result<Self, BlobError> {
+        Self::parse_inner(bytes, false)
+    }
+
+    fn parse_inner(bytes: &'a [u8], check_crc: bool) -> Result<Self, BlobError> {
         let b = bytes;
         if b.len() < HEADER_LEN {
             return Err(BlobError::Truncated);
@@ -438,7 +450,7 @@ impl<'a> QuantizedPolicy<'a> {
             .filter(|&e| e >= TABLE_END)
             .ok_or(BlobError::Truncated)?;
         let body = b.get(..data_end).ok_or(BlobError::Truncated)?;
-        if crc32(body) != rd_u32(b, data_end)? {
+        if check_crc && crc32(body) != rd_u32(b, data_end)? {
             return Err(BlobError::BadChecksum);
         }
         let arch = rd_u16(b, 10)?;
@@ -859,6 +871,32 @@ impl Policy for QuantizedAgent<'_> {
     /// records the error in [`QuantizedAgent::last_error`].
     fn act(&mut self, input: &PolicyInput<'_>) -> Action {
         self.decide(input).map_or(Action::Measure, |d| d.action)
+    }
+}
+
+/// The CRC-32 a blob carries in its last 4 bytes (over everything before them): the
+/// blob's identity in reports and the value a policy upload announces. (The CRC of a whole
+/// valid blob, its own CRC included, is the same constant for every blob.)
+pub fn stored_crc(blob: &[u8]) -> Option<u32> {
+    let t = blob.get(blob.len().checked_sub(CRC_LEN)?..)?;
+    Some(u32::from_le_bytes([t[0], t[1], t[2], t[3]]))
+}
+
+/// A [`Policy`] over a borrowed [`Scratch`]: what the device runs, keeping the 12 KiB of
+/// activations in its own `static` rather than in the agent.
+pub struct ScratchAgent<'p, 's> {
+    /// The network.
+    pub policy: QuantizedPolicy<'p>,
+    /// Its activations.
+    pub scratch: &'s mut Scratch,
+}
+
+impl Policy for ScratchAgent<'_, '_> {
+    /// As [`QuantizedAgent`]: the argmax action, or a measurement should the input not fit.
+    fn act(&mut self, input: &PolicyInput<'_>) -> Action {
+        self.policy
+            .decide(input, self.scratch)
+            .map_or(Action::Measure, |d| d.action)
     }
 }
 

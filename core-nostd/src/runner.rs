@@ -202,6 +202,12 @@ impl EpisodeRunner {
         &self.pipeline
     }
 
+    /// Lends the idle localizer's memory for another use between episodes (the device
+    /// stages policy uploads there); the next [`EpisodeRunner::start`] takes it back.
+    pub fn idle_storage(&mut self) -> &mut [u8] {
+        self.pipeline.idle_storage()
+    }
+
     /// The policy's history.
     pub fn history(&self) -> &History {
         &self.history

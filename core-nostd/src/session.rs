@@ -28,11 +28,13 @@
 //! termination rule fires, and at the end of every episode reports the coarse (belief
 //! argmax) and refined (sparse registration) AgentPoses.
 
+use crate::agents::AgentKind;
 use crate::agents::{Action, BaselineAgent};
 use crate::episode::{EpisodeConfig, Observation, SCAN_PIXELS};
 use crate::floorplan::{FloorPlan, PlanError, MAX_VERTICES};
 use crate::geometry::v2;
 use crate::pipeline::{registration_seed, PipelineError, PipelineParams};
+use crate::quantized::{QuantizedPolicy, Scratch as QScratch, ScratchAgent};
 use crate::runner::{Booked, EpisodeRunner};
 use crate::wire::*;
 use embedded_io::{Read, Write};
@@ -57,8 +59,28 @@ pub enum Step {
     Done(EpisodeReport),
 }
 
+/// Bytes of the RAM slot an uploaded int8 policy lives in (a K = 10 blob of the
+/// `conv8-4-fc32` network is 16,220 bytes).
+pub const POLICY_SLOT_BYTES: usize = 16 * 1024;
+
+/// Who decides in the running episode.
+enum DeviceAgent {
+    Baseline(BaselineAgent),
+    /// The int8 policy from the upload slot or from the built-in blob at this index.
+    Int8(Option<usize>),
+}
+
+/// An upload in progress (staged in the idle localizer's memory).
+#[derive(Clone, Copy)]
+struct Upload {
+    rot_bins: u8,
+    len: u32,
+    crc: u32,
+    received: u32,
+}
+
 struct Running {
-    agent: BaselineAgent,
+    agent: DeviceAgent,
     pending: Option<Action>,
     trace: TraceHash,
     cycles: EpisodeCycles,
@@ -74,12 +96,21 @@ pub struct Controller {
     cycles: UpdateStats,
     clock: Option<fn() -> u32>,
     runner: EpisodeRunner,
+    /// int8 policies in flash, validated when an episode asks for one.
+    builtin: &'static [&'static [u8]],
+    /// The uploaded policy (`slot_len` bytes; 0 = none) and its K.
+    slot: [u8; POLICY_SLOT_BYTES],
+    slot_len: usize,
+    slot_rot_bins: u8,
+    upload: Option<Upload>,
+    /// Activations of the int8 policy.
+    scratch: QScratch,
 }
 
 impl Controller {
     /// An idle controller. `clock` (a free-running cycle counter) enables per-update
-    /// cycle statistics.
-    pub const fn new(clock: Option<fn() -> u32>) -> Self {
+    /// cycle statistics; `policies` are the int8 blobs built into the firmware.
+    pub const fn new(clock: Option<fn() -> u32>, policies: &'static [&'static [u8]]) -> Self {
         Controller {
             plan: None,
             running: None,
@@ -90,7 +121,134 @@ impl Controller {
             },
             clock,
             runner: EpisodeRunner::new_empty(),
+            builtin: policies,
+            slot: [0; POLICY_SLOT_BYTES],
+            slot_len: 0,
+            slot_rot_bins: 0,
+            upload: None,
+            scratch: QScratch::new(),
         }
+    }
+
+    /// The policy serving `rot_bins`: the uploaded one if it is for this K, else the first
+    /// sound built-in one (`None` index = the upload slot).
+    fn policy_for(&self, rot_bins: u8) -> Option<(Option<usize>, &[u8])> {
+        if self.slot_len > 0 && self.slot_rot_bins == rot_bins {
+            return Some((None, &self.slot[..self.slot_len]));
+        }
+        self.builtin.iter().enumerate().find_map(|(i, b)| {
+            QuantizedPolicy::parse(b)
+                .ok()
+                .filter(|p| p.rot_bins() == rot_bins)
+                .map(|_| (Some(i), *b))
+        })
+    }
+
+    /// Which policy serves `rot_bins`.
+    pub fn policy_info(&self, rot_bins: u8) -> PolicyInfo {
+        match self.policy_for(rot_bins) {
+            Some((src, bytes)) => PolicyInfo {
+                rot_bins,
+                source: if src.is_none() {
+                    PolicySource::Uploaded
+                } else {
+                    PolicySource::BuiltIn
+                },
+                len: bytes.len() as u32,
+                crc: crate::quantized::stored_crc(bytes).unwrap_or(0),
+            },
+            None => PolicyInfo {
+                rot_bins,
+                source: PolicySource::None,
+                len: 0,
+                crc: 0,
+            },
+        }
+    }
+
+    /// True when some policy (built-in or uploaded) is on board.
+    pub fn has_policies(&self) -> bool {
+        !self.builtin.is_empty() || self.slot_len > 0
+    }
+
+    /// Starts a policy upload (between episodes only).
+    pub fn policy_begin(&mut self, rot_bins: u8, len: u32, crc: u32) -> Result<(), WireError> {
+        if self.running.is_some() {
+            return Err(WireError::UnexpectedRequest);
+        }
+        let capacity = POLICY_SLOT_BYTES as u32;
+        if len as usize > POLICY_SLOT_BYTES
+            || len as usize > self.runner.idle_storage().len()
+            || rot_bins == 0
+            || rot_bins > MAX_ROT_BINS
+        {
+            return Err(WireError::Policy(PolicyError::TooLarge { capacity }));
+        }
+        self.upload = Some(Upload {
+            rot_bins,
+            len,
+            crc,
+            received: 0,
+        });
+        Ok(())
+    }
+
+    /// Stages the next chunk of the upload.
+    pub fn policy_chunk(&mut self, offset: u32, data: &[u8]) -> Result<(), WireError> {
+        let up = self
+            .upload
+            .as_mut()
+            .ok_or(WireError::Policy(PolicyError::NoUpload))?;
+        if offset != up.received {
+            return Err(WireError::Policy(PolicyError::ChunkOffset {
+                expected: up.received,
+            }));
+        }
+        let end = offset as usize + data.len();
+        if end > up.len as usize {
+            return Err(WireError::Policy(PolicyError::Overrun));
+        }
+        let staging = self.runner.idle_storage();
+        staging
+            .get_mut(offset as usize..end)
+            .ok_or(WireError::Policy(PolicyError::Overrun))?
+            .copy_from_slice(data);
+        up.received = end as u32;
+        Ok(())
+    }
+
+    /// Checks the staged blob and puts it in service; a bad one changes nothing.
+    pub fn policy_commit(&mut self) -> Result<PolicyInfo, WireError> {
+        let up = self
+            .upload
+            .take()
+            .ok_or(WireError::Policy(PolicyError::NoUpload))?;
+        if up.received != up.len {
+            return Err(WireError::Policy(PolicyError::Incomplete {
+                received: up.received,
+            }));
+        }
+        let len = up.len as usize;
+        let staging = self.runner.idle_storage();
+        let blob = staging
+            .get(..len)
+            .ok_or(WireError::Policy(PolicyError::Overrun))?;
+        // The announced CRC is the blob's own (over all but its last 4 bytes); `parse`
+        // below checks that the blob agrees with itself.
+        let body = blob.get(..len.saturating_sub(4)).unwrap_or(&[]);
+        if crate::wire::crc32(body) != up.crc {
+            return Err(WireError::Policy(PolicyError::Checksum));
+        }
+        let found = QuantizedPolicy::parse(blob)
+            .map_err(|e| WireError::Policy(PolicyError::Invalid(e)))?
+            .rot_bins();
+        if found != up.rot_bins {
+            return Err(WireError::Policy(PolicyError::WrongRotBins { found }));
+        }
+        self.slot[..len].copy_from_slice(blob);
+        self.slot_len = len;
+        self.slot_rot_bins = found;
+        Ok(self.policy_info(found))
     }
 
     fn now(&self) -> u32 {
@@ -108,11 +266,13 @@ impl Controller {
         self.plan.as_ref()
     }
 
-    /// Drops plan, episode and statistics.
+    /// Drops plan, episode, statistics and any uploaded policy.
     pub fn reset(&mut self) {
         self.plan = None;
         self.running = None;
         self.cycles = UpdateStats::default();
+        self.upload = None;
+        self.slot_len = 0;
     }
 
     /// True while an episode runs.
@@ -160,8 +320,12 @@ impl Controller {
         if p.rot_bins == 0 || p.rot_bins > MAX_ROT_BINS {
             return bad(ParamError::RotBins);
         }
-        if !p.agent.is_baseline() {
-            return bad(ParamError::AgentUnavailable);
+        match p.agent {
+            AgentKind::Learnt => return bad(ParamError::AgentUnavailable),
+            AgentKind::LearntInt8 if self.policy_for(p.rot_bins).is_none() => {
+                return bad(ParamError::AgentUnavailable)
+            }
+            _ => {}
         }
         if let Some(h) = p.known_heading {
             if !h.is_finite() {
@@ -189,7 +353,6 @@ impl Controller {
             max_actions: p.max_actions,
             ..EpisodeConfig::default()
         };
-        let plan = self.plan.as_ref().ok_or(WireError::NoPlan)?;
         let pp = PipelineParams {
             rot_bins: p.rot_bins,
             known_heading: p.known_heading,
@@ -198,6 +361,18 @@ impl Controller {
             registration_seed: registration_seed(p.seed),
         };
         self.running = None;
+        // An episode takes the localizer's memory back from a staged upload.
+        self.upload = None;
+        let agent = if p.agent == AgentKind::LearntInt8 {
+            DeviceAgent::Int8(
+                self.policy_for(p.rot_bins)
+                    .ok_or(WireError::InvalidParams(ParamError::AgentUnavailable))?
+                    .0,
+            )
+        } else {
+            DeviceAgent::Baseline(BaselineAgent::new(p.agent, p.seed))
+        };
+        let plan = self.plan.as_ref().ok_or(WireError::NoPlan)?;
         self.runner
             .start(plan, &pp, config, p.initial_scan)
             .map_err(|e| {
@@ -208,7 +383,7 @@ impl Controller {
                 })
             })?;
         self.running = Some(Running {
-            agent: BaselineAgent::new(p.agent, p.seed),
+            agent,
             pending: None,
             trace: TraceHash::new(),
             cycles: EpisodeCycles::default(),
@@ -254,7 +429,29 @@ impl Controller {
                 action,
             });
         }
-        let step = self.runner.decide(&mut r.agent).map(|action| {
+        let t_decide = now();
+        let decided = match &mut r.agent {
+            DeviceAgent::Baseline(a) => self.runner.decide(a),
+            DeviceAgent::Int8(src) => {
+                let bytes: &[u8] = match *src {
+                    None => &self.slot[..self.slot_len],
+                    Some(i) => self.builtin.get(i).copied().unwrap_or(&[]),
+                };
+                // Validated (with its CRC) when the episode started or the upload was
+                // committed; the structure is re-checked, never trusted blindly.
+                match QuantizedPolicy::parse_verified(bytes) {
+                    Ok(policy) => self.runner.decide(&mut ScratchAgent {
+                        policy,
+                        scratch: &mut self.scratch,
+                    }),
+                    Err(_) => None,
+                }
+            }
+        };
+        if decided.is_some() {
+            r.cycles.decision.record(now().wrapping_sub(t_decide));
+        }
+        let step = decided.map(|action| {
             r.pending = Some(action);
             Step::Act {
                 step: self.runner.state().actions,
@@ -331,6 +528,9 @@ pub struct SessionConfig {
     pub timeout_ms: u32,
     /// Free-running cycle counter for per-update statistics.
     pub cycle_clock: Option<fn() -> u32>,
+    /// int8 policy blobs built into the firmware (`docs/policy-blob.md`), one per K; each
+    /// is validated (CRC included) when an episode asks for it.
+    pub policies: &'static [&'static [u8]],
 }
 
 /// What the caller should do after [`Session::feed`].
@@ -409,7 +609,7 @@ impl Session {
         Session {
             events: heapless::Deque::new(),
             acc: FrameAccumulator::new(),
-            ctl: Controller::new(config.cycle_clock),
+            ctl: Controller::new(config.cycle_clock, config.policies),
             config,
             open: false,
             last_id: NO_ID,
@@ -442,6 +642,10 @@ impl Session {
             | CAP_REGISTRATION;
         if self.config.cycle_clock.is_some() {
             capabilities |= CAP_CYCLE_COUNTS;
+        }
+        capabilities |= CAP_POLICY_UPLOAD;
+        if self.ctl.has_policies() {
+            capabilities |= CAP_LEARNT_POLICY;
         }
         DeviceInfo {
             protocol: PROTOCOL_VERSION,
@@ -709,6 +913,23 @@ impl Session {
                 self.ctl.abort();
                 return (Response::Ack, Control::Shutdown);
             }
+            Request::PolicyBegin { rot_bins, len, crc } => {
+                match self.ctl.policy_begin(rot_bins, len, crc) {
+                    Ok(()) => Response::Ack,
+                    Err(e) => Response::Error(e),
+                }
+            }
+            Request::PolicyChunk { offset, data } => match self.ctl.policy_chunk(offset, &data) {
+                Ok(()) => Response::Ack,
+                Err(e) => Response::Error(e),
+            },
+            Request::PolicyCommit => match self.ctl.policy_commit() {
+                Ok(info) => Response::PolicyInfo(info),
+                Err(e) => Response::Error(e),
+            },
+            Request::PolicyInfo { rot_bins } => {
+                Response::PolicyInfo(self.ctl.policy_info(rot_bins))
+            }
         };
         (r, Control::Continue)
     }
@@ -787,6 +1008,7 @@ mod tests {
         firmware: "test",
         timeout_ms: 1000,
         cycle_clock: None,
+        policies: &[],
     };
 
     fn frames(bytes: &[u8]) -> Vec<(u16, Response)> {

@@ -25,7 +25,7 @@ use heapless::{String as HString, Vec as HVec};
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 /// Protocol version; bumped on every incompatible change of a message or of the framing.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 /// The id carried by device replies to frames whose own id could not be read.
 pub const NO_ID: u16 = 0;
 /// Largest CRC-protected payload (postcard bytes + 4 CRC bytes).
@@ -54,6 +54,13 @@ pub const CAP_REGISTRATION: u32 = 1 << 3;
 pub const CAP_CYCLE_COUNTS: u32 = 1 << 4;
 /// Capability bit: honours `Shutdown` by stopping (QEMU: the emulator exits with 0).
 pub const CAP_SHUTDOWN: u32 = 1 << 5;
+/// Capability: the device runs the int8 learnt policy (`AgentKind::LearntInt8`) from policies
+/// in its flash; [`Request::PolicyInfo`] says which `K` it has.
+pub const CAP_LEARNT_POLICY: u32 = 1 << 6;
+/// Capability: policies can be uploaded into RAM ([`Request::PolicyBegin`]).
+pub const CAP_POLICY_UPLOAD: u32 = 1 << 7;
+/// Payload bytes of one [`Request::PolicyChunk`].
+pub const POLICY_CHUNK: usize = 512;
 
 /// Host → device messages.
 // LoadPlan dominates the size (≈ 970 B); no heap for boxing, and a request lives on the
@@ -100,6 +107,33 @@ pub enum Request {
     /// Stops the device (firmware under QEMU: exits the emulator with status 0 after the
     /// `Ack` has been sent).
     Shutdown,
+    /// Starts uploading an int8 policy blob (`docs/policy-blob.md`) of `len` bytes whose
+    /// own CRC-32 (its last 4 bytes, over everything before them) is `crc`, for `rot_bins`. Only between episodes; an episode started before
+    /// the commit cancels the upload. Answered by `Ack` or `Error(Policy(..))`.
+    PolicyBegin {
+        /// The K the blob is for.
+        rot_bins: u8,
+        /// Blob length in bytes.
+        len: u32,
+        /// The blob's CRC-32 (IEEE) over all but its last 4 bytes.
+        crc: u32,
+    },
+    /// The next piece of the blob, at byte `offset` (chunks in order). Answered by `Ack`.
+    PolicyChunk {
+        /// Offset of `data` in the blob; must equal the bytes received so far.
+        offset: u32,
+        /// Up to [`POLICY_CHUNK`] bytes.
+        data: HVec<u8, POLICY_CHUNK>,
+    },
+    /// Checks the uploaded blob (length, CRC, structure, K) and, when it is sound, puts it
+    /// in service for its K. A rejected blob leaves the policy in service untouched.
+    /// Answered by [`Response::PolicyInfo`] or `Error(Policy(..))`.
+    PolicyCommit,
+    /// Which policy serves `rot_bins`; answered by [`Response::PolicyInfo`].
+    PolicyInfo {
+        /// The K asked about.
+        rot_bins: u8,
+    },
 }
 
 /// Device → host messages.
@@ -132,6 +166,65 @@ pub enum Response {
     Ack,
     /// The request (or frame) was rejected; the device state is unchanged unless stated.
     Error(WireError),
+    /// The policy serving one K.
+    PolicyInfo(PolicyInfo),
+}
+
+/// Where the policy serving a K comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PolicySource {
+    /// No policy for this K: `LearntInt8` episodes are refused.
+    None,
+    /// Built into the firmware (flash).
+    BuiltIn,
+    /// Uploaded over the link (RAM; gone at power-off or `Reset`).
+    Uploaded,
+}
+
+/// Answer to [`Request::PolicyInfo`] and [`Request::PolicyCommit`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PolicyInfo {
+    /// The K.
+    pub rot_bins: u8,
+    /// Where the serving policy comes from.
+    pub source: PolicySource,
+    /// Its blob length (0 for none).
+    pub len: u32,
+    /// Its blob's own CRC-32 (the last 4 bytes; 0 for none).
+    pub crc: u32,
+}
+
+/// Why a policy upload request was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PolicyError {
+    /// Longer than the device's upload slot, or `rot_bins` out of range.
+    TooLarge {
+        /// The slot's capacity in bytes.
+        capacity: u32,
+    },
+    /// A chunk at the wrong offset.
+    ChunkOffset {
+        /// The offset the device expects next.
+        expected: u32,
+    },
+    /// A chunk that would run past the announced length.
+    Overrun,
+    /// Commit before all announced bytes arrived.
+    Incomplete {
+        /// Bytes received.
+        received: u32,
+    },
+    /// The received bytes do not have the announced CRC-32.
+    Checksum,
+    /// The blob is not a valid int8 policy.
+    Invalid(crate::quantized::BlobError),
+    /// The blob is for another K than announced.
+    WrongRotBins {
+        /// The K inside the blob.
+        found: u8,
+    },
+    /// No upload in progress (or it was cancelled by an episode).
+    NoUpload,
 }
 
 /// Parameters of one episode.
@@ -250,6 +343,9 @@ pub struct EpisodeCycles {
     /// The end-of-episode chain: coarse read-out of the belief, sparse registration and
     /// symmetry recognition (0 for an aborted episode).
     pub finish: u32,
+    /// The policy's decisions alone (feature extraction + the agent's choice; part of every
+    /// update above): the int8 network for `LearntInt8`, a counter step for the baselines.
+    pub decision: UpdateStats,
 }
 
 impl EpisodeCycles {
@@ -415,6 +511,8 @@ pub enum WireError {
     InvalidParams(ParamError),
     /// `Observe` rejected.
     InvalidObservation(ObservationError),
+    /// A policy upload request rejected.
+    Policy(PolicyError),
 }
 
 impl core::fmt::Display for WireError {
@@ -440,6 +538,7 @@ impl core::fmt::Display for WireError {
             WireError::NoPlan => write!(f, "no floor-plan loaded"),
             WireError::InvalidParams(e) => write!(f, "invalid episode parameters: {e:?}"),
             WireError::InvalidObservation(e) => write!(f, "invalid observation: {e:?}"),
+            WireError::Policy(e) => write!(f, "policy upload refused: {e:?}"),
         }
     }
 }

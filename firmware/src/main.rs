@@ -118,6 +118,7 @@ const CONFIG: SessionConfig = SessionConfig {
     firmware: concat!("activesense-fw ", env!("CARGO_PKG_VERSION")),
     timeout_ms: DEFAULT_TIMEOUT_MS,
     cycle_clock: Some(cycles),
+    policies: &activesense_core::builtin::POLICIES,
 };
 
 /// The whole protocol state (frame buffers, plan, measurement log) lives here, not on

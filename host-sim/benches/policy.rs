@@ -23,7 +23,10 @@ fn bench(c: &mut Criterion) {
         spec.rot_bins = k;
         let mut runner = Box::new(EpisodeRunner::new_empty());
         start_episode(&spec, &mut runner);
-        let (mut b, mut s) = (vec![0.0; k as usize * BELIEF_PLANE], vec![0.0; SIDE_FEATURES]);
+        let (mut b, mut s) = (
+            vec![0.0; k as usize * BELIEF_PLANE],
+            vec![0.0; SIDE_FEATURES],
+        );
         features(&runner.input(), &mut b, &mut s);
         let mut scratch = Scratch::new(net.shape);
         c.bench_function(&format!("forward K={k}"), |bch| {

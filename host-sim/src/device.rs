@@ -221,6 +221,7 @@ pub const HOST_DEVICE: SessionConfig = SessionConfig {
     firmware: concat!("host-session ", env!("CARGO_PKG_VERSION")),
     timeout_ms: DEFAULT_TIMEOUT_MS,
     cycle_clock: None,
+    policies: &activesense_core::builtin::POLICIES,
 };
 
 /// Serves the protocol from `session` over a std stream whose reads time out (the

@@ -318,6 +318,52 @@ impl<T: Read + Write> Client<T> {
         }
     }
 
+    /// Which policy serves `rot_bins` on the device.
+    pub fn policy_info(&mut self, rot_bins: u8) -> LinkResult<PolicyInfo> {
+        match self.call(&Request::PolicyInfo { rot_bins })? {
+            Response::PolicyInfo(i) => Ok(i),
+            other => Err(LinkError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    /// Uploads an int8 policy blob in [`POLICY_CHUNK`]-byte chunks and commits it; the
+    /// device checks length, CRC-32, structure and K before it serves the blob. `progress`
+    /// is told the bytes sent so far.
+    pub fn upload_policy(
+        &mut self,
+        rot_bins: u8,
+        blob: &[u8],
+        mut progress: impl FnMut(usize),
+    ) -> LinkResult<PolicyInfo> {
+        let len = u32::try_from(blob.len())
+            .map_err(|_| LinkError::Local("policy blob larger than 4 GiB".into()))?;
+        self.expect_ack(&Request::PolicyBegin {
+            rot_bins,
+            len,
+            crc: activesense_core::wire::crc32(&blob[..blob.len().saturating_sub(4)]),
+        })?;
+        for (i, chunk) in blob.chunks(POLICY_CHUNK).enumerate() {
+            let data = heapless::Vec::from_slice(chunk)
+                .map_err(|_| LinkError::Local("chunk larger than POLICY_CHUNK".into()))?;
+            self.expect_ack(&Request::PolicyChunk {
+                offset: (i * POLICY_CHUNK) as u32,
+                data,
+            })?;
+            progress(i * POLICY_CHUNK + chunk.len());
+        }
+        match self.call(&Request::PolicyCommit)? {
+            Response::PolicyInfo(i) => Ok(i),
+            other => Err(LinkError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
+    fn expect_ack(&mut self, req: &Request) -> LinkResult<()> {
+        match self.call(req)? {
+            Response::Ack => Ok(()),
+            other => Err(LinkError::Unexpected(format!("{other:?}"))),
+        }
+    }
+
     /// Stops the device.
     pub fn shutdown(&mut self) -> LinkResult<()> {
         match self.call(&Request::Shutdown)? {

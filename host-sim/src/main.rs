@@ -52,7 +52,8 @@ enum Command {
     /// Benchmark the GHT localizer against the classical grid localizer (cost, memory, recognition).
     BenchLocalization(BenchLocalizationArgs),
     /// The int8 policy for the instrument: quantise a float policy into a blob
-    /// (docs/policy-blob.md), or measure how often the int8 policy acts as the float one.
+    /// (docs/policy-blob.md), measure how often it acts as the float one, upload it to an
+    /// instrument, or ask an instrument which policy it runs.
     #[command(subcommand)]
     Policy(PolicyCommand),
 }
@@ -65,6 +66,11 @@ enum PolicyCommand {
     /// Float vs int8 on the test plans: argmax agreement per state and whole-episode
     /// outcomes of each; prints a table, writes JSON.
     Agreement(AgreementArgs),
+    /// Upload an int8 policy into the instrument's RAM slot, replacing the one serving its
+    /// K without reflashing (a corrupt or mismatched blob is refused; the old one serves on).
+    Upload(activesense_sim::remote::PolicyUploadArgs),
+    /// Show which policy serves K = 1 and K = 10 on the instrument (built-in or uploaded).
+    Info(activesense_sim::remote::PolicyInfoArgs),
 }
 
 #[derive(Args)]
@@ -151,14 +157,18 @@ struct BenchRegistrationArgs {
 
 #[derive(Args)]
 struct EvalArgs {
-    /// Comma-separated agent names (blind-0..2, heuristic-0..3, learnt), or "all" for the
-    /// seven Table-3 baselines and the learnt policy.
+    /// Comma-separated agent names (blind-0..2, heuristic-0..3, learnt, learnt-int8), or
+    /// "all" for the learnt policy (float and int8) and the seven Table-3 baselines.
     #[arg(long, default_value = "all", value_parser = parse_agents)]
     agents: AgentList,
     /// Learnt policy file(s), each used for the K its header names (repeat for K = 1 and
     /// 10); default: the committed policies/k{K}/policy.policy.
     #[arg(long)]
     policy: Vec<PathBuf>,
+    /// int8 policy blob(s) for learnt-int8, each used for the K its header names;
+    /// default: the blobs built into the firmware (policies/k{K}/policy.q8).
+    #[arg(long)]
+    int8: Vec<PathBuf>,
     /// Comma-separated rotation settings: 1 (heading known) and/or 10.
     #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
     rot_bins: Vec<u8>,
@@ -197,6 +207,7 @@ struct AgentList(Vec<AgentKind>);
 fn parse_agents(s: &str) -> Result<AgentList, String> {
     if s == "all" {
         let mut all = AgentKind::ALL.to_vec();
+        all.insert(0, AgentKind::LearntInt8);
         all.insert(0, AgentKind::Learnt);
         return Ok(AgentList(all));
     }
@@ -300,6 +311,9 @@ struct EpisodeArgs {
     /// Policy file for the learnt agent (default: the committed policies/k{K}/policy.policy).
     #[arg(long)]
     policy: Option<PathBuf>,
+    /// int8 blob for learnt-int8 (default: the one built into the firmware for this K).
+    #[arg(long)]
+    int8: Option<PathBuf>,
     /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=10))]
     rot_bins: u8,
@@ -344,6 +358,8 @@ fn main() -> ExitCode {
         Command::McuBench(a) => activesense_sim::remote::cmd_mcu_bench(a),
         Command::Policy(PolicyCommand::Quantize(a)) => cmd_policy_quantize(a),
         Command::Policy(PolicyCommand::Agreement(a)) => cmd_policy_agreement(a),
+        Command::Policy(PolicyCommand::Upload(a)) => activesense_sim::remote::cmd_policy_upload(a),
+        Command::Policy(PolicyCommand::Info(a)) => activesense_sim::remote::cmd_policy_info(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -526,14 +542,18 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         sensor: a.sensor.model()?,
         termination: a.termination,
     };
-    let policies = if spec.agent.is_baseline() {
-        Policies::default()
-    } else {
-        Policies::load(a.policy.as_slice(), &[spec.rot_bins])?
-    };
+    let mut policies = Policies::default();
+    match spec.agent {
+        AgentKind::Learnt => policies = Policies::load(a.policy.as_slice(), &[spec.rot_bins])?,
+        AgentKind::LearntInt8 => policies.load_int8(a.int8.as_slice(), &[spec.rot_bins])?,
+        _ => {}
+    }
     let t = run_agent_episode(&spec, &policies)?;
     for p in policies.iter() {
         println!("policy: {}", p.path.display());
+    }
+    for p in policies.int8() {
+        println!("policy: {}", p.describe());
     }
     println!(
         "episode: plan {} agent {} rot-bins {} max-actions {} episode-seed {}",
@@ -701,10 +721,20 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
     let mut opts = opts;
     if opts.agents.contains(&AgentKind::Learnt) {
         opts.policies = Policies::load(&a.policy, &opts.rot_bins)?;
-        opts.policy_files = opts.policies.iter().map(|p| p.describe()).collect();
     } else if !a.policy.is_empty() {
         bail!("--policy given but the learnt agent is not among --agents");
     }
+    if opts.agents.contains(&AgentKind::LearntInt8) {
+        opts.policies.load_int8(&a.int8, &opts.rot_bins)?;
+    } else if !a.int8.is_empty() {
+        bail!("--int8 given but the learnt-int8 agent is not among --agents");
+    }
+    opts.policy_files = opts
+        .policies
+        .iter()
+        .map(|p| p.describe())
+        .chain(opts.policies.int8().map(|p| p.describe()))
+        .collect();
     let command = std::env::args()
         .map(|w| w.rsplit('/').next().unwrap_or(&w).to_string())
         .collect::<Vec<_>>()

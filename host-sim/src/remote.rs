@@ -31,7 +31,8 @@ pub struct RemoteEpisodeArgs {
     /// Number of episodes (plan seeds first-seed, first-seed+1, ...).
     #[arg(long, default_value_t = 10)]
     pub episodes: u32,
-    /// Agent: blind-0..2, heuristic-0..3.
+    /// Agent: blind-0..2, heuristic-0..3, or learnt-int8 (the learnt policy the instrument
+    /// carries, or one uploaded with `activesense policy upload`).
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
     pub agent: AgentKind,
     /// Rotation bins: 1 = heading known (sent to the device), 10 = unknown.
@@ -113,10 +114,10 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
     if a.rot_bins != 1 && a.rot_bins != 10 {
         bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
     }
-    if !a.agent.is_baseline() {
+    if a.agent == AgentKind::Learnt {
         bail!(
-            "the instrument does not run the learnt policy yet (it needs the int8 policy in the \
-             firmware); use `activesense episode/eval --agent learnt` on the host, or a baseline here"
+            "the instrument runs the learnt policy in its int8 form: use --agent learnt-int8 \
+             (the float network 'learnt' runs only on the host: `activesense episode/eval`)"
         );
     }
     Ok(EpisodeSpec {
@@ -140,7 +141,7 @@ pub fn reference_run(
     params: &EpisodeParams,
     instrument: &mut SimInstrument,
 ) -> Result<EpisodeRun> {
-    let mut ctl = Box::new(Controller::new(None));
+    let mut ctl = Box::new(Controller::new(None, &activesense_core::builtin::POLICIES));
     let mut steps = Vec::new();
     let report = run_local(&mut ctl, plan, params, instrument, |a, o| {
         steps.push((a, *o))
@@ -413,7 +414,8 @@ pub struct McuBenchArgs {
     /// First plan seed (default: the first test plan).
     #[arg(long, default_value_t = TEST_SEEDS.start)]
     pub first_seed: u32,
-    /// Agent: blind-0..2, heuristic-0..3.
+    /// Agent: blind-0..2, heuristic-0..3, learnt-int8 (the policy decision column then
+    /// counts the int8 network).
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
     pub agent: AgentKind,
     /// Episode seed (placement, noise and agent randomness).
@@ -498,6 +500,8 @@ pub struct McuBenchRow {
     pub no_return: InstrStats,
     /// End-of-episode chain (coarse read-out, registration, recognition).
     pub finish: InstrStats,
+    /// The policy's decisions alone (part of every update).
+    pub decision: InstrStats,
 }
 
 /// Runs `a.episodes` episodes for K = 1 and K = 10 against the firmware in QEMU with
@@ -542,6 +546,7 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
             row.rotation.add(&c.rotation);
             row.no_return.add(&c.no_return);
             row.finish.add_one(c.finish);
+            row.decision.add(&c.decision);
         }
         rows.push(row);
     }
@@ -556,17 +561,18 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
 pub fn mcu_bench_table(rows: &[McuBenchRow]) -> String {
     let mut s = String::from(
         "| K | episodes | measurement update (GHT vote) | rotation update | no-return update | \
-         end of episode (registration) |\n|---|---|---|---|---|---|\n",
+         end of episode (registration) | policy decision |\n|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} |\n",
             r.rot_bins,
             r.episodes,
             r.vote.cell(),
             r.rotation.cell(),
             r.no_return.cell(),
-            r.finish.cell()
+            r.finish.cell(),
+            r.decision.cell()
         ));
     }
     s.push_str(&format!(
@@ -601,5 +607,92 @@ pub fn cmd_mcu_bench(a: McuBenchArgs) -> Result<()> {
     );
     print!("{}", mcu_bench_table(&rows));
     eprintln!("mcu-bench: {:.1} s", t0.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// `activesense policy upload`.
+#[derive(Args, Debug)]
+pub struct PolicyUploadArgs {
+    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
+    #[arg(long)]
+    pub link: LinkSpec,
+    /// The int8 policy blob (`activesense policy quantize` output).
+    #[arg(long)]
+    pub int8: PathBuf,
+    /// Reply timeout in milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+}
+
+/// `activesense policy info`.
+#[derive(Args, Debug)]
+pub struct PolicyInfoArgs {
+    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
+    #[arg(long)]
+    pub link: LinkSpec,
+    /// Reply timeout in milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+}
+
+fn print_policy(i: &activesense_core::wire::PolicyInfo) {
+    println!(
+        "K = {:>2}: {:?}{}",
+        i.rot_bins,
+        i.source,
+        if i.len > 0 {
+            format!(" ({} bytes, crc {:08x})", i.len, i.crc)
+        } else {
+            String::new()
+        }
+    );
+}
+
+/// Uploads an int8 policy into the instrument's RAM slot (it serves its K until power-off
+/// or `Reset`; the built-in policy serves again after that). The device refuses a blob
+/// that is corrupt or for another K and keeps the policy it had.
+pub fn cmd_policy_upload(a: PolicyUploadArgs) -> Result<()> {
+    let blob = std::fs::read(&a.int8)
+        .with_context(|| format!("cannot read int8 policy '{}'", a.int8.display()))?;
+    // Check locally first: a clear message beats a device error code.
+    let k = activesense_core::quantized::QuantizedPolicy::parse(&blob)
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "'{}' is not a usable int8 policy blob: {e}",
+                a.int8.display()
+            )
+        })?
+        .rot_bins();
+    let mut link = link::open(&a.link, Duration::from_millis(a.timeout_ms))
+        .with_context(|| format!("opening {:?}", a.link))?;
+    let info = link.client.hello().context("handshake")?;
+    if info.capabilities & activesense_core::wire::CAP_POLICY_UPLOAD == 0 {
+        bail!(
+            "the device ({}) does not accept policy uploads",
+            info.firmware
+        );
+    }
+    let bar = indicatif::ProgressBar::new(blob.len() as u64);
+    let installed = link
+        .client
+        .upload_policy(k, &blob, |n| bar.set_position(n as u64))
+        .with_context(|| format!("uploading '{}'", a.int8.display()))?;
+    bar.finish_and_clear();
+    println!("uploaded {} ({} bytes)", a.int8.display(), blob.len());
+    print_policy(&installed);
+    link.close().context("closing the link")?;
+    Ok(())
+}
+
+/// Prints which policy serves K = 1 and K = 10 on the instrument.
+pub fn cmd_policy_info(a: PolicyInfoArgs) -> Result<()> {
+    let mut link = link::open(&a.link, Duration::from_millis(a.timeout_ms))
+        .with_context(|| format!("opening {:?}", a.link))?;
+    let info = link.client.hello().context("handshake")?;
+    println!("device: {} (protocol v{})", info.firmware, info.protocol);
+    for k in [1u8, 10] {
+        print_policy(&link.client.policy_info(k)?);
+    }
+    link.close().context("closing the link")?;
     Ok(())
 }

@@ -10,16 +10,23 @@ use activesense_core::episode::Observation;
 use activesense_core::floorplan::PlanError;
 use activesense_core::wire::*;
 use activesense_sim::device::sim_episode;
-use activesense_sim::episode::{run_episode, EndReason, EpisodeSpec};
+use activesense_sim::episode::{EndReason, EpisodeSpec};
+use activesense_sim::learn::agent::{run_agent_episode, Int8Policy, Policies};
 use activesense_sim::link::{Client, LinkError};
 use activesense_sim::plans::TEST_SEEDS;
 use activesense_sim::remote::{reference_run, same_run};
 use std::io::{Read, Write};
 use std::path::PathBuf;
 
-/// The episode spec used by the link tests.
+/// The episode spec used by the link tests: baselines and the int8 learnt policy the
+/// device carries, in turn.
 pub fn spec(i: u32, rot_bins: u8) -> EpisodeSpec {
-    let agents = [AgentKind::Heuristic1, AgentKind::Blind2, AgentKind::Blind0];
+    let agents = [
+        AgentKind::Heuristic1,
+        AgentKind::LearntInt8,
+        AgentKind::Blind2,
+        AgentKind::Blind0,
+    ];
     EpisodeSpec {
         episode_seed: 7 + i as u64,
         rot_bins,
@@ -44,7 +51,12 @@ pub fn check_episodes<T: Read + Write>(client: &mut Client<T>, n: u32, rot_bins:
             "episode {i} K={rot_bins} differs from in-process"
         );
         assert_eq!(run.trace_hash(), run.report.trace_hash);
-        let traj = run_episode(&s);
+        // The host's own run: the baseline, or the int8 policy built into the firmware.
+        let mut policies = Policies::default();
+        policies
+            .load_int8(&[], &[rot_bins])
+            .expect("built-in int8 policies");
+        let traj = run_agent_episode(&s, &policies).expect("host episode");
         let lead: Vec<(Action, Option<u32>, u32)> = traj
             .steps
             .iter()
@@ -307,4 +319,135 @@ pub fn firmware_elf() -> PathBuf {
         .expect("run cargo to build the firmware");
     assert!(status.success(), "building the firmware failed");
     root.join(activesense_sim::link::DEFAULT_ELF)
+}
+
+/// Runs one learnt-int8 episode on the device and checks its actions against the host
+/// playing `blob` (bit-identical).
+fn learnt_episode_matches<T: Read + Write>(client: &mut Client<T>, seed_index: u32, blob: &[u8]) {
+    let mut s = spec(seed_index, 1);
+    s.agent = AgentKind::LearntInt8;
+    let (plan, params, mut inst) = sim_episode(&s);
+    client.load_plan(&plan).expect("load plan");
+    let run = client
+        .run_episode(&params, &mut inst)
+        .expect("learnt-int8 episode");
+    let mut policies = Policies::default();
+    policies.set_int8(Int8Policy::new(blob.to_vec(), "test blob".into()).expect("blob"));
+    let traj = run_agent_episode(&s, &policies).expect("host episode");
+    let host: Vec<Action> = traj.steps.iter().map(|st| st.action).collect();
+    let device: Vec<Action> = run.steps.iter().map(|(a, _)| *a).collect();
+    assert_eq!(
+        device, host,
+        "device and host disagree on the int8 policy's actions"
+    );
+}
+
+/// A K = 1 int8 blob different from the built-in one: a random network, quantised.
+pub fn other_k1_blob() -> Vec<u8> {
+    let net = activesense_sim::learn::quantize::random_net(1, 77);
+    activesense_sim::learn::quantize::quantize_calibrated(&net, 3, 5).0
+}
+
+/// The policy upload: a good blob replaces the built-in K = 1 policy and serves (episodes
+/// bit-identical to the host playing it); a corrupt, mis-announced or wrong-K blob is
+/// refused and the uploaded policy keeps serving; an episode cancels a staged upload;
+/// `Reset` brings the built-in policy back.
+pub fn policy_upload_suite<T: Read + Write>(client: &mut Client<T>) {
+    use activesense_core::builtin;
+    use activesense_core::quantized::stored_crc;
+    client.hello().expect("hello");
+    let before = client.policy_info(1).expect("info");
+    assert_eq!(before.source, PolicySource::BuiltIn);
+    assert_eq!(Some(before.crc), stored_crc(builtin::K1));
+    learnt_episode_matches(client, 1, builtin::K1);
+
+    let good = other_k1_blob();
+    assert_ne!(stored_crc(&good), stored_crc(builtin::K1));
+    let info = client.upload_policy(1, &good, |_| {}).expect("upload");
+    assert_eq!(info.source, PolicySource::Uploaded);
+    assert_eq!(
+        (info.len as usize, Some(info.crc)),
+        (good.len(), stored_crc(&good))
+    );
+    learnt_episode_matches(client, 1, &good);
+
+    // Structurally broken but with a matching CRC: refused by the blob parser.
+    let mut broken = good.clone();
+    broken[0] ^= 0xff;
+    match client.upload_policy(1, &broken, |_| {}) {
+        Err(LinkError::Device(WireError::Policy(PolicyError::Invalid(_)))) => {}
+        other => panic!("broken blob: {other:?}"),
+    }
+    // Bytes that do not match the announced CRC.
+    client
+        .call(&Request::PolicyBegin {
+            rot_bins: 1,
+            len: good.len() as u32,
+            crc: stored_crc(&good).unwrap() ^ 1,
+        })
+        .expect("begin");
+    for (i, c) in good.chunks(POLICY_CHUNK).enumerate() {
+        client
+            .call(&Request::PolicyChunk {
+                offset: (i * POLICY_CHUNK) as u32,
+                data: heapless::Vec::from_slice(c).unwrap(),
+            })
+            .expect("chunk");
+    }
+    match client.call(&Request::PolicyCommit) {
+        Err(LinkError::Device(WireError::Policy(PolicyError::Checksum))) => {}
+        other => panic!("bad crc: {other:?}"),
+    }
+    // The K = 10 blob announced as K = 1.
+    match client.upload_policy(1, builtin::K10, |_| {}) {
+        Err(LinkError::Device(WireError::Policy(PolicyError::WrongRotBins { found: 10 }))) => {}
+        other => panic!("wrong K: {other:?}"),
+    }
+    // Too large for the slot.
+    match client.call(&Request::PolicyBegin {
+        rot_bins: 1,
+        len: 1 << 20,
+        crc: 0,
+    }) {
+        Err(LinkError::Device(WireError::Policy(PolicyError::TooLarge { .. }))) => {}
+        other => panic!("too large: {other:?}"),
+    }
+    // A chunk out of order.
+    client
+        .call(&Request::PolicyBegin {
+            rot_bins: 1,
+            len: good.len() as u32,
+            crc: stored_crc(&good).unwrap(),
+        })
+        .expect("begin");
+    match client.call(&Request::PolicyChunk {
+        offset: 7,
+        data: heapless::Vec::new(),
+    }) {
+        Err(LinkError::Device(WireError::Policy(PolicyError::ChunkOffset { expected: 0 }))) => {}
+        other => panic!("offset: {other:?}"),
+    }
+    // Every refusal left the uploaded policy in service.
+    let after = client.policy_info(1).expect("info");
+    assert_eq!(
+        (after.source, Some(after.crc)),
+        (PolicySource::Uploaded, stored_crc(&good))
+    );
+    // An episode takes the staging memory back: the half-done upload is gone.
+    learnt_episode_matches(client, 2, &good);
+    match client.call(&Request::PolicyCommit) {
+        Err(LinkError::Device(WireError::Policy(PolicyError::NoUpload))) => {}
+        other => panic!("commit after an episode: {other:?}"),
+    }
+    // K = 10 still runs its built-in policy.
+    assert_eq!(
+        client.policy_info(10).expect("info").source,
+        PolicySource::BuiltIn
+    );
+    client.reset().expect("reset");
+    client.hello().expect("hello");
+    assert_eq!(
+        Some(client.policy_info(1).expect("info").crc),
+        stored_crc(builtin::K1)
+    );
 }

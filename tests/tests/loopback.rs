@@ -18,6 +18,13 @@ fn loopback_episodes_are_bit_identical_to_in_process_runs() {
 }
 
 #[test]
+fn loopback_policy_upload() {
+    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    activesense_tests::policy_upload_suite(&mut l.client);
+    l.close().unwrap();
+}
+
+#[test]
 fn loopback_fault_suite() {
     let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
     fault_suite(&mut l.client);

@@ -1,5 +1,6 @@
-//! `cargo xtask fuzz [SECS]`: a bounded cargo-fuzz run of `fuzz/fuzz_targets/session.rs`
-//! (frame decoder + device session state machine), default 60 s.
+//! `cargo xtask fuzz [SECS]`: bounded cargo-fuzz runs of `fuzz/fuzz_targets/session.rs`
+//! (frame decoder + device session state machine) and `fuzz/fuzz_targets/policy_blob.rs`
+//! (int8 policy blob parser + one decision), SECS each, default 60 s.
 //!
 //! cargo-fuzz needs nightly-only rustc flags (`-Zsanitizer=address`, sancov passes); on the
 //! stable toolchain this project pins, `RUSTC_BOOTSTRAP=1` unlocks them. Requires
@@ -28,22 +29,24 @@ pub fn run(args: &[String]) -> Result<()> {
     if !has_fuzz {
         bail!("cargo-fuzz is not installed (cargo install cargo-fuzz)");
     }
-    let status = Command::new("cargo")
-        .current_dir(&root)
-        .env("RUSTC_BOOTSTRAP", "1")
-        .args([
-            "fuzz",
-            "run",
-            "session",
-            "--",
-            &format!("-max_total_time={secs}"),
-            "-max_len=4096",
-        ])
-        .status()
-        .context("running cargo fuzz")?;
-    if !status.success() {
-        bail!("fuzzing failed ({status}); crashes are in fuzz/artifacts/session/");
+    for (target, max_len) in [("session", "4096"), ("policy_blob", "20000")] {
+        let status = Command::new("cargo")
+            .current_dir(&root)
+            .env("RUSTC_BOOTSTRAP", "1")
+            .args([
+                "fuzz",
+                "run",
+                target,
+                "--",
+                &format!("-max_total_time={secs}"),
+                &format!("-max_len={max_len}"),
+            ])
+            .status()
+            .context("running cargo fuzz")?;
+        if !status.success() {
+            bail!("fuzzing {target} failed ({status}); crashes are in fuzz/artifacts/{target}/");
+        }
+        println!("fuzz {target}: {secs} s without a crash");
     }
-    println!("fuzz: {secs} s without a crash");
     Ok(())
 }

@@ -216,6 +216,15 @@ impl GhtLocalizer {
         self.clear();
     }
 
+    /// The accumulator's memory (36 KB) for another use while no episode runs (the
+    /// device stages a policy upload there). The localizer is not ready afterwards:
+    /// [`GhtLocalizer::reset`] must run before the next vote.
+    pub fn idle_storage(&mut self) -> &mut [u8] {
+        self.ready = false;
+        self.total = 0.0;
+        &mut self.acc
+    }
+
     /// True after a successful [`GhtLocalizer::reset`].
     pub fn is_ready(&self) -> bool {
         self.ready

@@ -146,9 +146,63 @@ impl Policy for LearntAgent {
     }
 }
 
-/// The learnt policies of a run, one per rotation setting.
+/// An int8 policy blob (`docs/policy-blob.md`), validated, with where it came from.
+#[derive(Clone, Debug)]
+pub struct Int8Policy {
+    /// The blob's K.
+    pub rot_bins: u8,
+    /// The bytes.
+    pub blob: Arc<Vec<u8>>,
+    /// Its origin: a file, or the policy built into the firmware.
+    pub origin: String,
+}
+
+impl Int8Policy {
+    /// Validates `blob` (CRC included).
+    pub fn new(blob: Vec<u8>, origin: String) -> anyhow::Result<Self> {
+        let rot_bins = activesense_core::quantized::QuantizedPolicy::parse(&blob)
+            .map_err(|e| anyhow::anyhow!("{origin} is not a usable int8 policy blob: {e}"))?
+            .rot_bins();
+        Ok(Int8Policy {
+            rot_bins,
+            blob: Arc::new(blob),
+            origin,
+        })
+    }
+
+    /// Reads and validates a blob file.
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let bytes = std::fs::read(path)
+            .map_err(|e| anyhow::anyhow!("int8 policy '{}': {e}", path.display()))?;
+        Self::new(bytes, format!("int8 policy '{}'", path.display()))
+    }
+
+    /// File name (or origin) and CRC, for reports.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} (crc {:08x})",
+            self.origin,
+            activesense_core::quantized::stored_crc(&self.blob).unwrap_or(0)
+        )
+    }
+
+    /// Runs `f` with an agent playing this blob.
+    pub fn with_agent<R>(
+        &self,
+        f: impl FnOnce(&mut activesense_core::quantized::QuantizedAgent<'_>) -> R,
+    ) -> R {
+        // Validated in `new`, so parsing again cannot fail.
+        let policy = activesense_core::quantized::QuantizedPolicy::parse(&self.blob)
+            .expect("validated blob");
+        let mut agent = Box::new(activesense_core::quantized::QuantizedAgent::new(policy));
+        f(&mut agent)
+    }
+}
+
+/// The learnt policies of a run, one per rotation setting: float networks for the
+/// `learnt` agent, int8 blobs for `learnt-int8`.
 #[derive(Clone, Debug, Default)]
-pub struct Policies(Vec<LearntPolicy>);
+pub struct Policies(Vec<LearntPolicy>, Vec<Int8Policy>);
 
 impl Policies {
     /// Loads a policy for every setting in `rot_bins`: from `given` (files whose header
@@ -186,7 +240,58 @@ impl Policies {
                 anyhow::anyhow!("{e} (the learnt agent with --rot-bins {k} needs a policy for K = {k}; train one with `activesense train --rot-bins {k}` or pass --policy FILE)")
             })?);
         }
-        Ok(Policies(out))
+        Ok(Policies(out, Vec::new()))
+    }
+
+    /// Adds an int8 blob for every setting in `rot_bins`: from `given` files (each for the
+    /// K its header names; every setting must be covered when any is given), or the blobs
+    /// built into the firmware ([`activesense_core::builtin`]).
+    pub fn load_int8(&mut self, given: &[PathBuf], rot_bins: &[u8]) -> anyhow::Result<()> {
+        let mut blobs = Vec::new();
+        for path in given {
+            let p = Int8Policy::load(path)?;
+            if blobs.iter().any(|b: &Int8Policy| b.rot_bins == p.rot_bins) {
+                anyhow::bail!("two int8 policies for K = {}", p.rot_bins);
+            }
+            blobs.push(p);
+        }
+        if given.is_empty() {
+            for (k, bytes) in [
+                (1u8, activesense_core::builtin::K1),
+                (10, activesense_core::builtin::K10),
+            ] {
+                blobs.push(Int8Policy::new(
+                    bytes.to_vec(),
+                    format!("built-in k{k}/policy.q8"),
+                )?);
+            }
+        }
+        for &k in rot_bins {
+            let Some(p) = blobs.iter().find(|b| b.rot_bins == k) else {
+                anyhow::bail!(
+                    "--rot-bins {k} needs an int8 policy for K = {k}, but the --int8 file(s) given are for K = {}",
+                    blobs.iter().map(|b| b.rot_bins.to_string()).collect::<Vec<_>>().join(", ")
+                );
+            };
+            self.1.push(p.clone());
+        }
+        Ok(())
+    }
+
+    /// Uses `p` for its K (replacing any int8 policy for that K).
+    pub fn set_int8(&mut self, p: Int8Policy) {
+        self.1.retain(|q| q.rot_bins != p.rot_bins);
+        self.1.push(p);
+    }
+
+    /// The int8 policy for `rot_bins`.
+    pub fn int8_for(&self, rot_bins: u8) -> Option<&Int8Policy> {
+        self.1.iter().find(|p| p.rot_bins == rot_bins)
+    }
+
+    /// The loaded int8 policies.
+    pub fn int8(&self) -> impl Iterator<Item = &Int8Policy> {
+        self.1.iter()
     }
 
     /// The policy for `rot_bins`.
@@ -208,13 +313,22 @@ pub fn run_agent_episode(
     spec: &crate::episode::EpisodeSpec,
     policies: &Policies,
 ) -> anyhow::Result<crate::episode::Trajectory> {
-    if spec.agent.is_baseline() {
-        return Ok(crate::episode::run_episode(spec));
+    use activesense_core::agents::AgentKind;
+    match spec.agent {
+        AgentKind::Learnt => {
+            let p = policies.for_rot_bins(spec.rot_bins).ok_or_else(|| {
+                anyhow::anyhow!("no learnt policy loaded for K = {}", spec.rot_bins)
+            })?;
+            Ok(crate::episode::run_episode_with(spec, &mut p.agent()))
+        }
+        AgentKind::LearntInt8 => {
+            let p = policies.int8_for(spec.rot_bins).ok_or_else(|| {
+                anyhow::anyhow!("no int8 policy loaded for K = {}", spec.rot_bins)
+            })?;
+            Ok(p.with_agent(|agent| crate::episode::run_episode_with(spec, agent)))
+        }
+        _ => Ok(crate::episode::run_episode(spec)),
     }
-    let p = policies
-        .for_rot_bins(spec.rot_bins)
-        .ok_or_else(|| anyhow::anyhow!("no learnt policy loaded for K = {}", spec.rot_bins))?;
-    Ok(crate::episode::run_episode_with(spec, &mut p.agent()))
 }
 
 #[cfg(test)]
