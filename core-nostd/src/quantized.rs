@@ -81,6 +81,8 @@ const S2: usize = 8;
 const HIDDEN: usize = 64;
 const FLAT: usize = C2 * S2 * S2;
 const KK: usize = 9;
+/// Largest convolution output plane (conv1: 15 × 15).
+const MAX_CONV_OUT: usize = S1 * S1;
 /// Largest belief input: `MAX_ROT_BINS × 900` int8.
 pub const MAX_BELIEF_LEN: usize = MAX_ROT_BINS * BELIEF_PLANE;
 
@@ -531,7 +533,9 @@ impl<'a> QuantizedPolicy<'a> {
             let shift = section(b, rd_u32(b, e + 44)?, n, data_end)?;
             // Symmetric weights: −128 never occurs (CMSIS-NN's range), which also bounds
             // every accumulator well inside i32 (see `docs/policy-blob.md`).
-            if weights.iter().any(|&w| w as i8 == i8::MIN)
+            // (The weight scan is the costly part of a parse; a re-view of a verified blob
+            // skips it: the bytes are the ones checked then.)
+            if (check_crc && weights.iter().any(|&w| w as i8 == i8::MIN))
                 || multiplier.chunks_exact(4).any(|m| le_i32(m) < 0)
                 || shift
                     .iter()
@@ -726,7 +730,10 @@ pub fn saturating_rounding_doubling_high_mul(a: i32, b: i32) -> i32 {
     }
     let ab = a as i64 * b as i64;
     let nudge: i64 = if ab >= 0 { 1 << 30 } else { 1 - (1 << 30) };
-    ((ab + nudge) / (1i64 << 31)) as i32
+    // Division by 2³¹ truncating toward zero, as C's `/` in the reference, but with shifts:
+    // a 64-bit division is a library call of hundreds of instructions on the Cortex-M4.
+    let x = ab + nudge;
+    (if x >= 0 { x >> 31 } else { -((-x) >> 31) }) as i32
 }
 
 /// gemmlowp's `RoundingDivideByPOT`: `x / 2^exponent` rounded half away from zero
@@ -766,32 +773,89 @@ fn requantize_i8(acc: i32, multiplier: i32, shift: i32, zero_point: i32, relu: b
 fn conv3x3_s2_p1(layer: &LayerView<'_>, input: &[i8], out: &mut [i8]) {
     let d = layer.dims;
     let (n_in, n_out) = (d.in_size, d.out_size);
-    let in_plane = n_in * n_in;
+    let (c_in, in_plane, out_plane) = (d.inputs, n_in * n_in, n_out * n_out);
+    let fan_in = d.fan_in();
+    // Validated by `parse`; checked once here so nothing below can index out of bounds.
+    if input.len() < c_in * in_plane
+        || out.len() < d.outputs * out_plane
+        || layer.weights.len() < d.outputs * fan_in
+        || out_plane > MAX_CONV_OUT
+    {
+        return;
+    }
     let zp_in = layer.input.zero_point;
     let zp_out = layer.output.zero_point;
-    let planes = out.chunks_exact_mut(n_out * n_out);
-    let kernels = layer.weights.chunks_exact(d.fan_in());
-    for ((plane, kernel), (bias, mult, shift)) in planes.zip(kernels).zip(layer.channels()) {
-        for (oy, row) in plane.chunks_exact_mut(n_out).enumerate() {
-            for (ox, o) in row.iter_mut().enumerate() {
-                let mut acc: i32 = 0;
-                for (ci, wc) in input.chunks_exact(in_plane).zip(kernel.chunks_exact(KK)) {
-                    for (ky, wr) in wc.chunks_exact(3).enumerate() {
-                        let Some(iy) = (2 * oy + ky).checked_sub(1) else {
-                            continue;
-                        };
-                        let Some(src) = ci.get(iy * n_in..(iy + 1) * n_in) else {
-                            continue;
-                        };
-                        for (kx, &w) in wr.iter().enumerate() {
-                            let x = (2 * ox + kx).checked_sub(1).and_then(|ix| src.get(ix));
-                            if let Some(&x) = x {
-                                acc += (x as i32 - zp_in) * (w as i8 as i32);
-                            }
+    // Σ (x − zp)·w = Σ x·w − zp · Σ w over the taps inside the input: the inner loop
+    // multiplies raw int8 values, and the zero point is paid once per output with the
+    // summed weights of its valid taps. Weights stay in registers across a whole plane.
+    let mut acc = [0i32; MAX_CONV_OUT];
+    for (co, (bias, mult, shift)) in layer.channels().enumerate() {
+        let acc = &mut acc[..out_plane];
+        acc.fill(0);
+        let mut wsum = [0i32; KK];
+        let kernel = &layer.weights[co * fan_in..(co + 1) * fan_in];
+        for (plane, wc) in input.chunks_exact(in_plane).zip(kernel.chunks_exact(KK)) {
+            let mut w = [0i32; KK];
+            for (k, (wk, &b)) in w.iter_mut().zip(wc).enumerate() {
+                *wk = b as i8 as i32;
+                wsum[k] += *wk;
+            }
+            for (oy, acc_row) in acc.chunks_exact_mut(n_out).enumerate() {
+                let r = 2 * oy; // input row of the kernel's middle row
+                for (ky, wr) in [(0usize, 0usize), (1, 3), (2, 6)] {
+                    let Some(row) = (r + ky)
+                        .checked_sub(1)
+                        .and_then(|y| plane.get(y * n_in..(y + 1) * n_in))
+                    else {
+                        continue;
+                    };
+                    let (w0, w1, w2) = (w[wr], w[wr + 1], w[wr + 2]);
+                    // Output column 0 has no left tap (padding); columns 1.. read the
+                    // windows row[2·ox − 1 ..= 2·ox + 1], stepping by 2.
+                    if let (Some(a), Some(&x1), Some(&x2)) =
+                        (acc_row.first_mut(), row.first(), row.get(1))
+                    {
+                        *a += x1 as i32 * w1 + x2 as i32 * w2;
+                    }
+                    let rest = acc_row.get_mut(1..).unwrap_or(&mut []);
+                    let windows = row.get(1..).unwrap_or(&[]).windows(3).step_by(2);
+                    let full = windows.len();
+                    for (a, win) in rest.iter_mut().zip(windows) {
+                        *a += win[0] as i32 * w0 + win[1] as i32 * w1 + win[2] as i32 * w2;
+                    }
+                    // A last column whose right tap falls in the padding (odd n_in).
+                    if let Some(a) = rest.get_mut(full) {
+                        let c = 2 * (full + 1);
+                        if let (Some(&x0), Some(&x1)) = (row.get(c - 1), row.get(c)) {
+                            *a += x0 as i32 * w0 + x1 as i32 * w1;
                         }
                     }
                 }
-                *o = requantize_i8(acc.saturating_add(bias), mult, shift, zp_out, d.relu);
+            }
+        }
+        // A tap (o, k) reads input index 2·o + k − 1, valid inside 0..n_in.
+        let valid = |o: usize, k: usize| (2 * o + k).checked_sub(1).is_some_and(|i| i < n_in);
+        for (oy, acc_row) in acc.chunks_exact(n_out).enumerate() {
+            // Weight sums of this output row's valid kernel rows, per kernel column.
+            let mut col = [0i32; 3];
+            for ky in 0..3 {
+                if valid(oy, ky) {
+                    for (kx, c) in col.iter_mut().enumerate() {
+                        *c += wsum[ky * 3 + kx];
+                    }
+                }
+            }
+            let all = col[0] + col[1] + col[2];
+            for (ox, &a) in acc_row.iter().enumerate() {
+                let ws = if ox > 0 && 2 * ox + 1 < n_in {
+                    all
+                } else {
+                    (0..3).filter(|&kx| valid(ox, kx)).map(|kx| col[kx]).sum()
+                };
+                let v = a.wrapping_sub(zp_in.wrapping_mul(ws));
+                if let Some(o) = out.get_mut(co * out_plane + oy * n_out + ox) {
+                    *o = requantize_i8(v.saturating_add(bias), mult, shift, zp_out, d.relu);
+                }
             }
         }
     }

@@ -1151,7 +1151,7 @@ mod tests {
 
     #[test]
     fn cycle_statistics_split_by_update_kind() {
-        let mut ctl = Controller::new(Some(tick7));
+        let mut ctl = Controller::new(Some(tick7), &[]);
         let plan = FloorPlan::from_raw(HVec::from_slice(&square()).unwrap()).unwrap();
         ctl.load_plan(plan);
         ctl.start(&params(40)).unwrap();
@@ -1178,9 +1178,13 @@ mod tests {
         assert_eq!(c.no_return.updates, rep.no_returns as u32);
         assert_eq!(c.rotation.updates, rep.rotations as u32);
         assert_eq!(c.updates().updates, rep.actions as u32);
-        // Each update reads the clock twice (observe start, decision end): 7 ticks apart.
-        assert_eq!(c.vote.max_cycles, 7);
-        assert_eq!(c.updates().total_cycles, 7 * rep.actions as u64);
+        // Each update reads the clock four times (observe start, decision start and end,
+        // update end): 3 × 7 ticks; the decision alone spans one reading, 7 ticks. The last
+        // update decides nothing (the episode ends): 2 × 7.
+        assert_eq!(c.vote.max_cycles, 21);
+        assert_eq!(c.updates().total_cycles, 21 * rep.actions as u64 - 7);
+        assert_eq!(c.decision.updates, rep.actions as u32);
+        assert_eq!(c.decision.max_cycles, 7);
         assert_eq!(c.finish, 7);
         assert_eq!(ctl.cycles(), c.updates());
     }
@@ -1347,6 +1351,7 @@ mod tests {
                 rotation: max_stats,
                 no_return: max_stats,
                 finish: u32::MAX,
+                decision: max_stats,
             },
         };
         let mut info = s.device_info();

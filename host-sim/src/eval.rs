@@ -443,9 +443,9 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         );
         let _ = writeln!(
             s,
-            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | episode time (s) |"
+            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | cost | episode time (s) |"
         );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
         for (g, r) in report
             .results
             .iter()
@@ -454,7 +454,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         {
             let _ = writeln!(
                 s,
-                "| {} | {:.3} [{:.3}, {:.3}] | {} [{}, {}] | {} | {} | {} | {:.2} [{:.2}, {:.2}] | {:.2} [{:.2}, {:.2}] | {:.1} |",
+                "| {} | {:.3} [{:.3}, {:.3}] | {} [{}, {}] | {} | {} | {} | {:.2} [{:.2}, {:.2}] | {:.2} [{:.2}, {:.2}] | {:.3} | {:.1} |",
                 r.agent,
                 r.recognition_rate,
                 r.recognition_ci95[0],
@@ -471,6 +471,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
                 r.rotations,
                 r.rotations_ci95[0],
                 r.rotations_ci95[1],
+                r.cost,
                 timing.group_episode_s.get(g).copied().unwrap_or(0.0)
             );
         }
@@ -484,23 +485,41 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
     );
     let _ = writeln!(
         s,
-        "| agent | | recognition rate | pose error (m) | measurements | rotations |"
+        "| agent | | recognition rate | pose error (m) | measurements | rotations | cost |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|");
     let find = |agent: &str, k: u8| {
         report
             .results
             .iter()
             .find(|r| r.agent == agent && r.rot_bins == k)
     };
+    let costs = opts_costs(report);
     for (name, p) in PAPER_TABLE_4.iter() {
         let _ = writeln!(
             s,
-            "| {name} | paper | {:.3} ({:.3}) | {:.4} ({:.4}) | {:.3} ({:.3}) | {:.3} ({:.3}) |",
-            p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7]
+            "| {name} | paper | {:.3} ({:.3}) | {:.4} ({:.4}) | {:.3} ({:.3}) | {:.3} ({:.3}) | {:.3} ({:.3}) |",
+            p[0],
+            p[1],
+            p[2],
+            p[3],
+            p[4],
+            p[5],
+            p[6],
+            p[7],
+            costs.0 * p[4] + costs.1 * p[6],
+            costs.0 * p[5] + costs.1 * p[7]
         );
-        let (a, b) = (find(name, 1), find(name, 10));
-        if a.is_some() || b.is_some() {
+        let ours: &[(&str, &str)] = if name.starts_with("our approach") {
+            &[("learnt", "**ours**"), ("learnt-int8", "**ours, int8**")]
+        } else {
+            &[(name, "**ours**")]
+        };
+        for (agent, label) in ours {
+            let (a, b) = (find(agent, 1), find(agent, 10));
+            if a.is_none() && b.is_none() {
+                continue;
+            }
             let f =
                 |r: Option<&GroupResult>, get: &dyn Fn(&GroupResult) -> Option<f64>, d: usize| {
                     r.and_then(get)
@@ -509,7 +528,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
                 };
             let _ = writeln!(
                 s,
-                "| | **ours** | {} ({}) | {} ({}) | {} ({}) | {} ({}) |",
+                "| | {label} | {} ({}) | {} ({}) | {} ({}) | {} ({}) | {} ({}) |",
                 f(a, &|r| Some(r.recognition_rate), 3),
                 f(b, &|r| Some(r.recognition_rate), 3),
                 f(a, &|r| r.pose_error, 4),
@@ -518,10 +537,18 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
                 f(b, &|r| Some(r.measurements), 3),
                 f(a, &|r| Some(r.rotations), 3),
                 f(b, &|r| Some(r.rotations), 3),
+                f(a, &|r| Some(r.cost), 3),
+                f(b, &|r| Some(r.cost), 3),
             );
         }
     }
     s
+}
+
+/// (measurement, rotation) costs of the run, for the paper's cost column.
+fn opts_costs(report: &EvalReport) -> (f64, f64) {
+    let c = report.options.config.costs;
+    (c.measure as f64, c.rotate as f64)
 }
 
 /// Writes results.json, results.md, timing.json and budget.svg into `out`.

@@ -735,10 +735,7 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
         .map(|p| p.describe())
         .chain(opts.policies.int8().map(|p| p.describe()))
         .collect();
-    let command = std::env::args()
-        .map(|w| w.rsplit('/').next().unwrap_or(&w).to_string())
-        .collect::<Vec<_>>()
-        .join(" ");
+    let command = command_line();
     eprintln!(
         "evaluating {} agent(s) x {} rotation setting(s) x {} plans = {} episodes",
         opts.agents.len(),
@@ -867,10 +864,7 @@ fn cmd_train(a: TrainArgs) -> Result<()> {
         Some(p) => Some(file::load_expecting(p, a.rot_bins, shape_for(a.rot_bins).side)?.0),
         None => None,
     };
-    let command = std::env::args()
-        .map(|w| w.rsplit('/').next().unwrap_or(&w).to_string())
-        .collect::<Vec<_>>()
-        .join(" ");
+    let command = command_line();
     let shape = shape_for(a.rot_bins);
     eprintln!(
         "training K = {}: network {} ({} parameters, {} multiply-accumulates per decision), {} threads",
@@ -916,4 +910,20 @@ fn cmd_train(a: TrainArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The command line as typed, with the program's directory dropped (`activesense eval …`),
+/// for the outputs that record how they were made.
+fn command_line() -> String {
+    std::env::args()
+        .enumerate()
+        .map(|(i, w)| {
+            if i == 0 {
+                w.rsplit('/').next().unwrap_or(&w).to_string()
+            } else {
+                w
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
 }

@@ -110,6 +110,20 @@ pub fn report(elf: &Path) -> Result<()> {
         s.ram as f64 / 1024.0,
         RAM_BUDGET / 1024
     );
+    {
+        use activesense_core::{builtin, quantized, session};
+        let blobs = builtin::K1.len() + builtin::K10.len();
+        println!(
+            "of which the learnt policy: flash {} bytes (int8 blobs K = 1: {}, K = 10: {}); \
+             RAM {} bytes (int8 activations {} + upload slot {})",
+            blobs,
+            builtin::K1.len(),
+            builtin::K10.len(),
+            quantized::SCRATCH_BYTES + session::POLICY_SLOT_BYTES,
+            quantized::SCRATCH_BYTES,
+            session::POLICY_SLOT_BYTES
+        );
+    }
     if s.flash > FLASH_BUDGET {
         bail!("flash budget exceeded");
     }

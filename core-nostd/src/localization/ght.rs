@@ -427,12 +427,59 @@ impl GhtLocalizer {
         if l == 0 || !self.interior[i % l] {
             return 0.0;
         }
+        self.q_of_level(self.level(i))
+    }
+
+    /// [`GhtLocalizer::q`] of an interior cell whose best slot is `level` quanta above `base`.
+    #[inline]
+    fn q_of_level(&self, level: u8) -> f32 {
         if self.cfg.evidence_gain > 0.0 {
-            self.qtab[(self.amax - self.level(i)) as usize]
+            self.qtab[self.amax.saturating_sub(level) as usize]
         } else if self.total > 0.0 {
-            self.weight(i)
+            (level as u32 + self.base) as f32 / VOTE_QUANTA as f32
         } else {
             1.0
+        }
+    }
+
+    /// The normalised probability of a cell from its level alone (`None`: outside the
+    /// room): the same arithmetic as [`GhtLocalizer::prob`], bit for bit. A cell's
+    /// probability depends on nothing else, so a caller that needs every cell's value (the
+    /// policy's belief map) computes at most 256 of them and looks the rest up.
+    pub fn prob_of_level(&self, level: Option<u8>) -> f32 {
+        match level {
+            Some(m) if self.z > 0.0 => self.q_of_level(m) / self.z,
+            _ => 0.0,
+        }
+    }
+
+    /// The largest level of any interior cell (`None` without interior cells): votes land
+    /// only in interior cells, so it is the accumulator's running maximum, kept exact
+    /// through rebasing.
+    pub fn max_level(&self) -> Option<u8> {
+        (self.n_interior > 0).then_some(self.amax)
+    }
+
+    /// Calls `f(i, level)` for every flat cell `i` in order, `level` as in
+    /// [`GhtLocalizer::prob_of_level`]; no division per cell.
+    pub fn for_each_level(&self, mut f: impl FnMut(usize, Option<u8>)) {
+        let l = self.grid.layer_len();
+        let slots = self.slots();
+        let mut i = 0;
+        for bin in 0..self.grid.rot_bins as usize {
+            for cell in 0..l {
+                let level = if self.interior[cell] {
+                    let mut m = 0u8;
+                    for s in 0..slots {
+                        m = m.max(self.acc[(bin * TRACKED_SUB_BINS + s) * l + cell]);
+                    }
+                    Some(m)
+                } else {
+                    None
+                };
+                f(i, level);
+                i += 1;
+            }
         }
     }
 
