@@ -75,6 +75,10 @@ pub struct Staged {
 /// `sub_bins ≤ TRACKED_SUB_BINS` every sub-bin has its own slot; with more, sub-bin `s` of
 /// `S` shares slot `s·T/S` (max-combined within a measurement).
 pub const TRACKED_SUB_BINS: usize = 4;
+const _: () = assert!(
+    TRACKED_SUB_BINS == 4,
+    "for_each_level walks four slot layers"
+);
 /// Vote quantum: a measurement adds `round(w·VOTE_QUANTA)` (`w ∈ [0, 1]`) to a slot.
 pub const VOTE_QUANTA: u8 = 16;
 
@@ -464,19 +468,32 @@ impl GhtLocalizer {
     /// [`GhtLocalizer::prob_of_level`]; no division per cell.
     pub fn for_each_level(&self, mut f: impl FnMut(usize, Option<u8>)) {
         let l = self.grid.layer_len();
-        let slots = self.slots();
+        if l == 0 || l > MAX_LAYER_CELLS {
+            return;
+        }
+        let slots = self.slots().clamp(1, TRACKED_SUB_BINS);
+        let interior = &self.interior[..l];
         let mut i = 0;
-        for bin in 0..self.grid.rot_bins as usize {
-            for cell in 0..l {
-                let level = if self.interior[cell] {
-                    let mut m = 0u8;
-                    for s in 0..slots {
-                        m = m.max(self.acc[(bin * TRACKED_SUB_BINS + s) * l + cell]);
+        // One bin's slots are `TRACKED_SUB_BINS` consecutive layers: walk them side by side
+        // (the instrument builds the policy's belief map from this every decision).
+        for bin_acc in self
+            .acc
+            .chunks_exact(TRACKED_SUB_BINS * l)
+            .take(self.grid.rot_bins as usize)
+        {
+            let (s0, rest) = bin_acc.split_at(l);
+            let (s1, rest) = rest.split_at(l);
+            let (s2, s3) = rest.split_at(l);
+            for (cell, &inside) in interior.iter().enumerate() {
+                let level = inside.then(|| {
+                    let m = s0[cell];
+                    match slots {
+                        1 => m,
+                        2 => m.max(s1[cell]),
+                        3 => m.max(s1[cell]).max(s2[cell]),
+                        _ => m.max(s1[cell]).max(s2[cell]).max(s3[cell]),
                     }
-                    Some(m)
-                } else {
-                    None
-                };
+                });
                 f(i, level);
                 i += 1;
             }
