@@ -1,8 +1,10 @@
 //! Fuzz target: the int8 policy blob parser (`QuantizedPolicy::parse`) and, for whatever it
-//! accepts, one decision on a fixed episode state. Neither may panic on any bytes.
+//! accepts, one decision on a fixed episode state. Neither may panic on any bytes. Half the
+//! inputs are raw bytes; the other half are edits of the firmware's K = 1 blob (the input as
+//! `(offset, xor)` byte pairs) with the length field and CRC repaired, so the fuzzer reaches the
+//! tensor table and the kernels instead of stopping at the checksum.
 #![no_main]
 
-use activesense_core::agents::{AgentKind, BaselineAgent};
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::geometry::v2;
 use activesense_core::pipeline::{PipelineParams, Termination};
@@ -12,7 +14,24 @@ use activesense_core::FloorPlan;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let Ok(policy) = QuantizedPolicy::parse(data) else {
+    let Some((&mode, rest)) = data.split_first() else {
+        return;
+    };
+    let bytes: Vec<u8> = if mode & 1 == 0 {
+        rest.to_vec()
+    } else {
+        let mut b = activesense_core::builtin::K1.to_vec();
+        for e in rest.chunks_exact(3) {
+            let at = u16::from_le_bytes([e[0], e[1]]) as usize % b.len();
+            b[at] ^= e[2];
+        }
+        let n = b.len();
+        b[20..24].copy_from_slice(&(n as u32).to_le_bytes());
+        let crc = activesense_core::wire::crc32(&b[..n - 4]);
+        b[n - 4..].copy_from_slice(&crc.to_le_bytes());
+        b
+    };
+    let Ok(policy) = QuantizedPolicy::parse(&bytes) else {
         return;
     };
     let plan = FloorPlan::new(&[v2(0.0, 0.0), v2(6.0, 0.0), v2(6.0, 4.0), v2(0.0, 4.0)])
@@ -34,5 +53,4 @@ fuzz_target!(|data: &[u8]| {
     }
     let mut scratch = Box::new(Scratch::new());
     let _ = policy.decide(&runner.input(), &mut scratch);
-    let _ = BaselineAgent::new(AgentKind::Heuristic1, 1);
 });

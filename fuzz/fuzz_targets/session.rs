@@ -27,6 +27,8 @@ fuzz_target!(|data: &[u8]| {
         firmware: "fuzz",
         timeout_ms: 50,
         cycle_clock: None,
+        // The firmware's policies: learnt-int8 episodes and uploads are fuzzed too.
+        policies: &activesense_core::builtin::POLICIES,
     }));
     let mut out = Sink(Vec::new());
     let chunk = 1 + (ctl as usize & 31);

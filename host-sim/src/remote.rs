@@ -31,8 +31,8 @@ pub struct RemoteEpisodeArgs {
     /// Number of episodes (plan seeds first-seed, first-seed+1, ...).
     #[arg(long, default_value_t = 10)]
     pub episodes: u32,
-    /// Agent: blind-0..2, heuristic-0..3, or learnt-int8 (the learnt policy the instrument
-    /// carries, or one uploaded with `activesense policy upload`).
+    /// Agent: blind-0..2, heuristic-0..3, or learnt (= learnt-int8: the int8 policy the
+    /// instrument carries, or one uploaded with `activesense policy upload`).
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
     pub agent: AgentKind,
     /// Rotation bins: 1 = heading known (sent to the device), 10 = unknown.
@@ -114,16 +114,15 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
     if a.rot_bins != 1 && a.rot_bins != 10 {
         bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
     }
-    if a.agent == AgentKind::Learnt {
-        bail!(
-            "the instrument runs the learnt policy in its int8 form: use --agent learnt-int8 \
-             (the float network 'learnt' runs only on the host: `activesense episode/eval`)"
-        );
-    }
     Ok(EpisodeSpec {
         plan_seed,
         episode_seed: a.episode_seed,
-        agent: a.agent,
+        // The instrument runs the learnt policy in its int8 form: that is what `learnt`
+        // means on a device (the float network exists only on the host).
+        agent: match a.agent {
+            AgentKind::Learnt => AgentKind::LearntInt8,
+            other => other,
+        },
         rot_bins: a.rot_bins,
         config: EpisodeConfig {
             steps_per_turn: DEFAULT_STEPS_PER_TURN,

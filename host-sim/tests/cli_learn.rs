@@ -134,16 +134,25 @@ fn a_corrupt_policy_is_a_clear_error() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("broken.policy"), "{err}");
     assert_eq!(err.lines().count(), 1, "one line: {err}");
+    // On a device `learnt` is the int8 policy it carries: episodes verified against the
+    // in-process run.
     let o = activesense(&[
         "sim",
         "--link",
         "loopback",
         "--agent",
         "learnt",
+        "--rot-bins",
+        "10",
         "--episodes",
-        "1",
+        "2",
+        "--verify",
     ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("verified bit-identical"));
+    // Uploading a file that is not a policy: one line naming it, nothing sent.
+    let o = activesense(&["policy", "upload", "--link", "loopback", "--int8", s(&bad)]);
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("learnt"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("broken.policy"));
     std::fs::remove_dir_all(&dir).ok();
 }

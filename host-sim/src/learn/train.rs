@@ -521,8 +521,9 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
                 grad_norm as f64,
             );
             bar.set_message(format!(
-                "{} eps, {:.0} steps/s, return {:+.3}, recognition {:.3}, cost {:.3}, entropy {:.3}",
+                "{} eps ({:.0} eps/s, {:.0} steps/s), return {:+.3}, recognition {:.3}, cost {:.3}, entropy {:.3}",
                 row.episodes,
+                row.episodes as f64 / wall.max(1e-9),
                 row.steps_per_s,
                 row.mean_return,
                 row.recognition,
