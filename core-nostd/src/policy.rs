@@ -168,6 +168,15 @@ impl PolicyInput<'_> {
                 *t = map(loc.prob_of_level(Some(m as u8)) * scale);
             }
         }
+        if nx == BELIEF_SIDE && ny == BELIEF_SIDE {
+            // The grid is the map: flat cell index = output index.
+            loc.for_each_level(|i, lv| {
+                if let Some(o) = out.get_mut(i) {
+                    *o = lv.map_or(outside, |m| table[m as usize]);
+                }
+            });
+            return n;
+        }
         out[..n].iter_mut().for_each(|v| *v = blank);
         // Cells come in grid order, [bin][y][x]: walk the output position along.
         let (mut x, mut y, mut base) = (0usize, 0usize, 0usize);

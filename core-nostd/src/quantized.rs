@@ -780,6 +780,7 @@ fn conv3x3_s2_p1(layer: &LayerView<'_>, input: &[i8], out: &mut [i8]) {
         || out.len() < d.outputs * out_plane
         || layer.weights.len() < d.outputs * fan_in
         || out_plane > MAX_CONV_OUT
+        || n_in < 2
     {
         return;
     }
@@ -787,47 +788,60 @@ fn conv3x3_s2_p1(layer: &LayerView<'_>, input: &[i8], out: &mut [i8]) {
     let zp_out = layer.output.zero_point;
     // Σ (x − zp)·w = Σ x·w − zp · Σ w over the taps inside the input: the inner loop
     // multiplies raw int8 values, and the zero point is paid once per output with the
-    // summed weights of its valid taps. Weights stay in registers across a whole plane.
-    let mut acc = [0i32; MAX_CONV_OUT];
-    for (co, (bias, mult, shift)) in layer.channels().enumerate() {
-        let acc = &mut acc[..out_plane];
-        acc.fill(0);
-        let mut wsum = [0i32; KK];
-        let kernel = &layer.weights[co * fan_in..(co + 1) * fan_in];
-        for (plane, wc) in input.chunks_exact(in_plane).zip(kernel.chunks_exact(KK)) {
-            let mut w = [0i32; KK];
-            for (k, (wk, &b)) in w.iter_mut().zip(wc).enumerate() {
-                *wk = b as i8 as i32;
-                wsum[k] += *wk;
+    // summed weights of its valid taps. Two output channels share every input load, and
+    // their weights stay in registers across a whole plane.
+    let mut acc = [[0i32; MAX_CONV_OUT]; 2];
+    let mut co = 0;
+    while co < d.outputs {
+        let width = (d.outputs - co).min(2);
+        let (acc_a, acc_b) = acc.split_at_mut(1);
+        let (acc_a, acc_b) = (&mut acc_a[0][..out_plane], &mut acc_b[0][..out_plane]);
+        acc_a.fill(0);
+        acc_b.fill(0);
+        let mut wsum = [[0i32; KK]; 2];
+        for (ci, plane) in input.chunks_exact(in_plane).take(c_in).enumerate() {
+            let mut w = [[0i32; KK]; 2];
+            for j in 0..width {
+                let base = (co + j) * fan_in + ci * KK;
+                for (k, &b) in layer.weights[base..base + KK].iter().enumerate() {
+                    w[j][k] = b as i8 as i32;
+                    wsum[j][k] += w[j][k];
+                }
             }
-            for (oy, acc_row) in acc.chunks_exact_mut(n_out).enumerate() {
+            for (oy, (ra, rb)) in acc_a
+                .chunks_exact_mut(n_out)
+                .zip(acc_b.chunks_exact_mut(n_out))
+                .enumerate()
+            {
                 let r = 2 * oy; // input row of the kernel's middle row
-                for (ky, wr) in [(0usize, 0usize), (1, 3), (2, 6)] {
-                    let Some(row) = (r + ky)
+                for wr in [0usize, 3, 6] {
+                    let Some(row) = (r + wr / 3)
                         .checked_sub(1)
                         .and_then(|y| plane.get(y * n_in..(y + 1) * n_in))
                     else {
                         continue;
                     };
-                    let (w0, w1, w2) = (w[wr], w[wr + 1], w[wr + 2]);
+                    let (a0, a1, a2) = (w[0][wr], w[0][wr + 1], w[0][wr + 2]);
+                    let (b0, b1, b2) = (w[1][wr], w[1][wr + 1], w[1][wr + 2]);
                     // Output column 0 has no left tap (padding); columns 1.. read the
                     // windows row[2·ox − 1 ..= 2·ox + 1], stepping by 2.
-                    if let (Some(a), Some(&x1), Some(&x2)) =
-                        (acc_row.first_mut(), row.first(), row.get(1))
-                    {
-                        *a += x1 as i32 * w1 + x2 as i32 * w2;
-                    }
-                    let rest = acc_row.get_mut(1..).unwrap_or(&mut []);
-                    let windows = row.get(1..).unwrap_or(&[]).windows(3).step_by(2);
+                    let (x1, x2) = (row[0] as i32, row[1] as i32);
+                    ra[0] += x1 * a1 + x2 * a2;
+                    rb[0] += x1 * b1 + x2 * b2;
+                    let windows = row[1..].windows(3).step_by(2);
                     let full = windows.len();
-                    for (a, win) in rest.iter_mut().zip(windows) {
-                        *a += win[0] as i32 * w0 + win[1] as i32 * w1 + win[2] as i32 * w2;
+                    for ((pa, pb), win) in ra[1..].iter_mut().zip(rb[1..].iter_mut()).zip(windows) {
+                        let (x0, x1, x2) = (win[0] as i32, win[1] as i32, win[2] as i32);
+                        *pa += x0 * a0 + x1 * a1 + x2 * a2;
+                        *pb += x0 * b0 + x1 * b1 + x2 * b2;
                     }
                     // A last column whose right tap falls in the padding (odd n_in).
-                    if let Some(a) = rest.get_mut(full) {
+                    if full + 1 < n_out {
                         let c = 2 * (full + 1);
                         if let (Some(&x0), Some(&x1)) = (row.get(c - 1), row.get(c)) {
-                            *a += x0 as i32 * w0 + x1 as i32 * w1;
+                            let (x0, x1) = (x0 as i32, x1 as i32);
+                            ra[full + 1] += x0 * a0 + x1 * a1;
+                            rb[full + 1] += x0 * b0 + x1 * b1;
                         }
                     }
                 }
@@ -835,29 +849,37 @@ fn conv3x3_s2_p1(layer: &LayerView<'_>, input: &[i8], out: &mut [i8]) {
         }
         // A tap (o, k) reads input index 2·o + k − 1, valid inside 0..n_in.
         let valid = |o: usize, k: usize| (2 * o + k).checked_sub(1).is_some_and(|i| i < n_in);
-        for (oy, acc_row) in acc.chunks_exact(n_out).enumerate() {
-            // Weight sums of this output row's valid kernel rows, per kernel column.
-            let mut col = [0i32; 3];
-            for ky in 0..3 {
-                if valid(oy, ky) {
-                    for (kx, c) in col.iter_mut().enumerate() {
-                        *c += wsum[ky * 3 + kx];
+        for ((j, accj), (bias, mult, shift)) in [&*acc_a, &*acc_b]
+            .into_iter()
+            .enumerate()
+            .take(width)
+            .zip(layer.channels().skip(co))
+        {
+            for (oy, acc_row) in accj.chunks_exact(n_out).enumerate() {
+                // Weight sums of this output row's valid kernel rows, per kernel column.
+                let mut col = [0i32; 3];
+                for ky in 0..3 {
+                    if valid(oy, ky) {
+                        for (kx, c) in col.iter_mut().enumerate() {
+                            *c += wsum[j][ky * 3 + kx];
+                        }
+                    }
+                }
+                let all = col[0] + col[1] + col[2];
+                for (ox, &a) in acc_row.iter().enumerate() {
+                    let ws = if ox > 0 && 2 * ox + 1 < n_in {
+                        all
+                    } else {
+                        (0..3).filter(|&kx| valid(ox, kx)).map(|kx| col[kx]).sum()
+                    };
+                    let v = a.wrapping_sub(zp_in.wrapping_mul(ws));
+                    if let Some(o) = out.get_mut((co + j) * out_plane + oy * n_out + ox) {
+                        *o = requantize_i8(v.saturating_add(bias), mult, shift, zp_out, d.relu);
                     }
                 }
             }
-            let all = col[0] + col[1] + col[2];
-            for (ox, &a) in acc_row.iter().enumerate() {
-                let ws = if ox > 0 && 2 * ox + 1 < n_in {
-                    all
-                } else {
-                    (0..3).filter(|&kx| valid(ox, kx)).map(|kx| col[kx]).sum()
-                };
-                let v = a.wrapping_sub(zp_in.wrapping_mul(ws));
-                if let Some(o) = out.get_mut(co * out_plane + oy * n_out + ox) {
-                    *o = requantize_i8(v.saturating_add(bias), mult, shift, zp_out, d.relu);
-                }
-            }
         }
+        co += width;
     }
 }
 
@@ -1081,6 +1103,100 @@ pub fn write_blob(
 fn put(out: &mut [u8], at: usize, bytes: &[u8]) {
     if let Some(dst) = out.get_mut(at..at + bytes.len()) {
         dst.copy_from_slice(bytes);
+    }
+}
+
+/// The one-channel-at-a-time kernel the paired one replaced: the reference its test
+/// compares against.
+#[cfg(test)]
+fn conv3x3_s2_p1_one_channel(layer: &LayerView<'_>, input: &[i8], out: &mut [i8]) {
+    let d = layer.dims;
+    let (n_in, n_out) = (d.in_size, d.out_size);
+    let (c_in, in_plane, out_plane) = (d.inputs, n_in * n_in, n_out * n_out);
+    let fan_in = d.fan_in();
+    // Validated by `parse`; checked once here so nothing below can index out of bounds.
+    if input.len() < c_in * in_plane
+        || out.len() < d.outputs * out_plane
+        || layer.weights.len() < d.outputs * fan_in
+        || out_plane > MAX_CONV_OUT
+    {
+        return;
+    }
+    let zp_in = layer.input.zero_point;
+    let zp_out = layer.output.zero_point;
+    // Σ (x − zp)·w = Σ x·w − zp · Σ w over the taps inside the input: the inner loop
+    // multiplies raw int8 values, and the zero point is paid once per output with the
+    // summed weights of its valid taps. Weights stay in registers across a whole plane.
+    let mut acc = [0i32; MAX_CONV_OUT];
+    for (co, (bias, mult, shift)) in layer.channels().enumerate() {
+        let acc = &mut acc[..out_plane];
+        acc.fill(0);
+        let mut wsum = [0i32; KK];
+        let kernel = &layer.weights[co * fan_in..(co + 1) * fan_in];
+        for (plane, wc) in input.chunks_exact(in_plane).zip(kernel.chunks_exact(KK)) {
+            let mut w = [0i32; KK];
+            for (k, (wk, &b)) in w.iter_mut().zip(wc).enumerate() {
+                *wk = b as i8 as i32;
+                wsum[k] += *wk;
+            }
+            for (oy, acc_row) in acc.chunks_exact_mut(n_out).enumerate() {
+                let r = 2 * oy; // input row of the kernel's middle row
+                for (ky, wr) in [(0usize, 0usize), (1, 3), (2, 6)] {
+                    let Some(row) = (r + ky)
+                        .checked_sub(1)
+                        .and_then(|y| plane.get(y * n_in..(y + 1) * n_in))
+                    else {
+                        continue;
+                    };
+                    let (w0, w1, w2) = (w[wr], w[wr + 1], w[wr + 2]);
+                    // Output column 0 has no left tap (padding); columns 1.. read the
+                    // windows row[2·ox − 1 ..= 2·ox + 1], stepping by 2.
+                    if let (Some(a), Some(&x1), Some(&x2)) =
+                        (acc_row.first_mut(), row.first(), row.get(1))
+                    {
+                        *a += x1 as i32 * w1 + x2 as i32 * w2;
+                    }
+                    let rest = acc_row.get_mut(1..).unwrap_or(&mut []);
+                    let windows = row.get(1..).unwrap_or(&[]).windows(3).step_by(2);
+                    let full = windows.len();
+                    for (a, win) in rest.iter_mut().zip(windows) {
+                        *a += win[0] as i32 * w0 + win[1] as i32 * w1 + win[2] as i32 * w2;
+                    }
+                    // A last column whose right tap falls in the padding (odd n_in).
+                    if let Some(a) = rest.get_mut(full) {
+                        let c = 2 * (full + 1);
+                        if let (Some(&x0), Some(&x1)) = (row.get(c - 1), row.get(c)) {
+                            *a += x0 as i32 * w0 + x1 as i32 * w1;
+                        }
+                    }
+                }
+            }
+        }
+        // A tap (o, k) reads input index 2·o + k − 1, valid inside 0..n_in.
+        let valid = |o: usize, k: usize| (2 * o + k).checked_sub(1).is_some_and(|i| i < n_in);
+        for (oy, acc_row) in acc.chunks_exact(n_out).enumerate() {
+            // Weight sums of this output row's valid kernel rows, per kernel column.
+            let mut col = [0i32; 3];
+            for ky in 0..3 {
+                if valid(oy, ky) {
+                    for (kx, c) in col.iter_mut().enumerate() {
+                        *c += wsum[ky * 3 + kx];
+                    }
+                }
+            }
+            let all = col[0] + col[1] + col[2];
+            for (ox, &a) in acc_row.iter().enumerate() {
+                let ws = if ox > 0 && 2 * ox + 1 < n_in {
+                    all
+                } else {
+                    (0..3).filter(|&kx| valid(ox, kx)).map(|kx| col[kx]).sum()
+                };
+                let v = a.wrapping_sub(zp_in.wrapping_mul(ws));
+                if let Some(o) = out.get_mut(co * out_plane + oy * n_out + ox) {
+                    *o = requantize_i8(v.saturating_add(bias), mult, shift, zp_out, d.relu);
+                }
+            }
+        }
     }
 }
 
@@ -1361,6 +1477,27 @@ mod tests {
             p.infer(&belief[..899], &side, &mut s),
             Err(RunError::BadInput)
         );
+    }
+
+    #[test]
+    fn paired_conv_equals_the_one_channel_kernel() {
+        // Both convolutions of random blobs, on random inputs: the kernel that computes
+        // two output channels per input load gives the reference's outputs bit for bit.
+        for seed in [1u64, 2, 3] {
+            let blob = random_blob(seed);
+            let p = QuantizedPolicy::parse(&blob).unwrap();
+            let mut rng = Pcg32::seed_from_u64(seed);
+            for li in [L_CONV1, L_CONV2] {
+                let l = p.layer(li).unwrap();
+                let n_in = l.dims.inputs * l.dims.in_size * l.dims.in_size;
+                let input: Vec<i8> = (0..n_in).map(|_| rng.next_u32() as i8).collect();
+                let n = l.dims.output_len();
+                let (mut a, mut b) = (vec![0i8; n], vec![0i8; n]);
+                conv3x3_s2_p1(l, &input, &mut a);
+                conv3x3_s2_p1_one_channel(l, &input, &mut b);
+                assert_eq!(a, b, "seed {seed} layer {li}");
+            }
+        }
     }
 
     #[test]

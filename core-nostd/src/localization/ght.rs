@@ -484,17 +484,11 @@ impl GhtLocalizer {
             let (s0, rest) = bin_acc.split_at(l);
             let (s1, rest) = rest.split_at(l);
             let (s2, s3) = rest.split_at(l);
-            for (cell, &inside) in interior.iter().enumerate() {
-                let level = inside.then(|| {
-                    let m = s0[cell];
-                    match slots {
-                        1 => m,
-                        2 => m.max(s1[cell]),
-                        3 => m.max(s1[cell]).max(s2[cell]),
-                        _ => m.max(s1[cell]).max(s2[cell]).max(s3[cell]),
-                    }
-                });
-                f(i, level);
+            // Unused slots stay 0, so the maximum over all four is the maximum over the
+            // used ones: one loop, no per-cell branching on the slot count.
+            debug_assert!(slots <= TRACKED_SUB_BINS);
+            for ((((&a, &b), &c), &d), &inside) in s0.iter().zip(s1).zip(s2).zip(s3).zip(interior) {
+                f(i, inside.then(|| a.max(b).max(c).max(d)));
                 i += 1;
             }
         }
