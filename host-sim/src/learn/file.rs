@@ -141,14 +141,9 @@ impl fmt::Display for PolicyFileError {
     }
 }
 
-impl std::error::Error for PolicyFileError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            PolicyFileError::Io(e) => Some(e),
-            _ => None,
-        }
-    }
-}
+// No `source()`: the messages already include their cause, and a chained report
+// (`anyhow`'s `{:#}`) would print it again.
+impl std::error::Error for PolicyFileError {}
 
 /// A [`PolicyFileError`] with the file it came from:
 /// `policy file 'x.policy': checksum mismatch (…): the file is corrupt`.
@@ -164,11 +159,7 @@ impl fmt::Display for LoadError {
     }
 }
 
-impl std::error::Error for LoadError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        Some(&self.error)
-    }
-}
+impl std::error::Error for LoadError {}
 
 /// Serialises `net` and `meta`. Refuses non-finite parameters (a diverged network should
 /// fail where it is saved, not where it is flashed) and shapes the header cannot hold.
