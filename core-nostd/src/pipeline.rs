@@ -344,11 +344,12 @@ pub fn registration_seed(agent_seed: u64) -> u64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::geometry::{unit, v2};
 
-    fn l_room() -> FloorPlan {
+    /// An 8 × 6 m L-shaped room in the model frame (shared by the core's tests).
+    pub(crate) fn l_room() -> FloorPlan {
         FloorPlan::new(&[
             v2(0.0, 0.0),
             v2(8.0, 0.0),

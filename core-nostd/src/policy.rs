@@ -247,23 +247,14 @@ impl Policy for BaselineAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{unit, v2};
+    use crate::geometry::unit;
     use crate::localization::LocalizerConfig;
 
     #[test]
     fn belief_map_is_probability_over_peak_bit_for_bit() {
         // The table-driven extraction equals the plain definition prob(i) · (1 / peak) at
         // every cell, before and after votes, with the heading known and unknown.
-        let plan = crate::FloorPlan::new(&[
-            v2(0.0, 0.0),
-            v2(8.0, 0.0),
-            v2(8.0, 3.0),
-            v2(4.0, 3.0),
-            v2(4.0, 6.0),
-            v2(0.0, 6.0),
-        ])
-        .unwrap()
-        .centered();
+        let plan = crate::pipeline::tests::l_room();
         let truth = crate::Pose2::new(-1.0, -0.5, 0.3);
         for cfg in [
             LocalizerConfig::known_heading(0.3),
