@@ -98,6 +98,16 @@ pub enum AgentKind {
     /// The learnt policy quantised to int8 ([`crate::quantized`]): what the instrument
     /// runs, and the host too, bit for bit.
     LearntInt8,
+    /// Oracle-based information-gain maximisation (§4.3, eqs. 11–13): a greedy benchmark
+    /// that stages every bearing's measurement as the ground truth would answer it. Host
+    /// only (`activesense_sim::greedy`): it needs the ground truth.
+    Oigm,
+    /// OIGM with the gain divided by the cost of the rotations and the measurement that
+    /// reach the bearing (the paper's OIGM ignores rotation cost). Host only.
+    OigmCost,
+    /// Expected-entropy minimisation (§4.3, eq. 14; Fox et al. 1998 on the GHT belief).
+    /// Host only (`activesense_sim::greedy`).
+    Eem,
 }
 
 impl AgentKind {
@@ -124,12 +134,23 @@ impl AgentKind {
             AgentKind::Heuristic3 => "heuristic-3",
             AgentKind::Learnt => "learnt",
             AgentKind::LearntInt8 => "learnt-int8",
+            AgentKind::Oigm => "oigm",
+            AgentKind::OigmCost => "oigm-cost",
+            AgentKind::Eem => "eem",
         }
     }
 
     /// True for the seven Table-3 baselines (which [`BaselineAgent`] plays).
     pub fn is_baseline(self) -> bool {
-        !matches!(self, AgentKind::Learnt | AgentKind::LearntInt8)
+        AgentKind::ALL.contains(&self)
+    }
+
+    /// The §4.3 greedy benchmarks (host-side agents: the instrument refuses them).
+    pub const GREEDY: [AgentKind; 3] = [AgentKind::Oigm, AgentKind::OigmCost, AgentKind::Eem];
+
+    /// True for the greedy benchmarks.
+    pub fn is_greedy(self) -> bool {
+        AgentKind::GREEDY.contains(&self)
     }
 
     /// Parses a paper name (`learnt` included).
@@ -138,6 +159,7 @@ impl AgentKind {
             .iter()
             .copied()
             .chain([AgentKind::Learnt, AgentKind::LearntInt8])
+            .chain(AgentKind::GREEDY)
             .find(|a| a.name() == s)
     }
 
@@ -151,6 +173,9 @@ impl AgentKind {
         match id {
             7 => Some(AgentKind::Learnt),
             8 => Some(AgentKind::LearntInt8),
+            9 => Some(AgentKind::Oigm),
+            10 => Some(AgentKind::OigmCost),
+            11 => Some(AgentKind::Eem),
             _ => AgentKind::ALL.get(id as usize).copied(),
         }
     }
@@ -243,10 +268,18 @@ mod tests {
 
     #[test]
     fn names_round_trip() {
-        for k in AgentKind::ALL {
+        let every = AgentKind::ALL
+            .into_iter()
+            .chain([AgentKind::Learnt, AgentKind::LearntInt8])
+            .chain(AgentKind::GREEDY);
+        for (i, k) in every.enumerate() {
             assert_eq!(AgentKind::from_name(k.name()), Some(k));
             assert_eq!(AgentKind::from_id(k.id()), Some(k));
+            assert_eq!(k.id() as usize, i, "ids are dense and stable");
+            assert_eq!(k.is_baseline(), i < 7);
+            assert_eq!(k.is_greedy(), i >= 9);
         }
+        assert_eq!(AgentKind::from_id(12), None);
         assert_eq!(AgentKind::from_name("heuristic-9"), None);
         assert_eq!(AgentKind::from_name("learnt"), Some(AgentKind::Learnt));
         assert_eq!(

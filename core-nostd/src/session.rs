@@ -321,7 +321,10 @@ impl Controller {
             return bad(ParamError::RotBins);
         }
         match p.agent {
-            AgentKind::Learnt => return bad(ParamError::AgentUnavailable),
+            // The float network and the greedy benchmarks live on the host only.
+            AgentKind::Learnt | AgentKind::Oigm | AgentKind::OigmCost | AgentKind::Eem => {
+                return bad(ParamError::AgentUnavailable)
+            }
             AgentKind::LearntInt8 if self.policy_for(p.rot_bins).is_none() => {
                 return bad(ParamError::AgentUnavailable)
             }

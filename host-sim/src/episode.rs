@@ -109,6 +109,10 @@ pub struct StepRecord {
     pub entropy: f32,
     /// Belief argmax after the action (AgentPose), once a vote has landed.
     pub argmax: Option<Pose2>,
+    /// Coarse success of that argmax against the truth (the oracle's test) after the
+    /// action.
+    #[serde(default)]
+    pub coarse_success: bool,
 }
 
 /// Why an episode ended.
@@ -210,10 +214,39 @@ pub fn start_episode(spec: &EpisodeSpec, runner: &mut EpisodeRunner) -> (FloorPl
 /// (the one the instrument runs) against the simulated room, then registration, scoring
 /// and the trajectory record.
 pub fn run_episode_with(spec: &EpisodeSpec, policy: &mut dyn Policy) -> Trajectory {
+    run_episode_observed(spec, policy, &mut |_| {})
+}
+
+/// What an observer of [`run_episode_observed`] sees: the episode's state before the first
+/// action and after every action.
+pub struct EpisodeView<'a> {
+    /// The core loop (pipeline, belief, counts).
+    pub runner: &'a EpisodeRunner,
+    /// The room.
+    pub plan: &'a FloorPlan,
+    /// The ground truth.
+    pub truth: &'a Pose2,
+    /// The step just recorded (`None` before the first action).
+    pub step: Option<&'a StepRecord>,
+}
+
+/// [`run_episode_with`], calling `observe` before the first action and after each one (the
+/// evaluation's utility-vs-cost curves read the belief and register mid-episode there).
+pub fn run_episode_observed(
+    spec: &EpisodeSpec,
+    policy: &mut dyn Policy,
+    observe: &mut dyn FnMut(EpisodeView<'_>),
+) -> Trajectory {
     let mut runner = Box::new(EpisodeRunner::new_empty());
     let (plan, mut world, initial_scan) = start_episode(spec, &mut runner);
     let truth = world.truth();
-    let mut steps = Vec::with_capacity(spec.config.max_actions as usize);
+    let mut steps: Vec<StepRecord> = Vec::with_capacity(spec.config.max_actions as usize);
+    observe(EpisodeView {
+        runner: &runner,
+        plan: &plan,
+        truth: &truth,
+        step: None,
+    });
     while let Some(action) = runner.decide(policy) {
         let (obs, step_truth) = world.act(action);
         // The simulated sensors only produce valid answers.
@@ -239,6 +272,13 @@ pub fn run_episode_with(spec: &EpisodeSpec, policy: &mut dyn Policy) -> Trajecto
             } else {
                 None
             },
+            coarse_success: pipe.has_belief() && loc.coarse_success(&truth, pipe.symmetry_order()),
+        });
+        observe(EpisodeView {
+            runner: &runner,
+            plan: &plan,
+            truth: &truth,
+            step: steps.last(),
         });
     }
     let end = match runner.stop() {
@@ -303,7 +343,8 @@ pub fn parse_agent(s: &str) -> Result<AgentKind, String> {
     AgentKind::from_name(s).ok_or_else(|| {
         let names: Vec<_> = AgentKind::ALL
             .iter()
-            .chain(&[AgentKind::Learnt])
+            .chain(&[AgentKind::Learnt, AgentKind::LearntInt8])
+            .chain(&AgentKind::GREEDY)
             .map(|a| a.name())
             .collect();
         format!(

@@ -22,8 +22,8 @@
 //! - *measurements / rotations*: mean counts per episode, including failed episodes that
 //!   ran to the action limit.
 
-use crate::episode::{EpisodeSpec, Termination, Trajectory};
-use crate::learn::agent::{run_agent_episode, Policies};
+use crate::episode::{score, EpisodeSpec, EpisodeView, Termination, Trajectory};
+use crate::learn::agent::{run_agent_episode_observed, Policies};
 use crate::sensor::SensorModel;
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::EpisodeConfig;
@@ -63,6 +63,10 @@ pub struct EvalOptions {
     /// Show a progress bar.
     #[serde(skip)]
     pub progress: bool,
+    /// The pose-error-vs-cost curve registers after every measurement of the first this
+    /// many plans (the entropy and recognition curves use every plan).
+    #[serde(default)]
+    pub curve_plans: u32,
 }
 
 /// Summary of one episode kept for aggregation.
@@ -201,6 +205,9 @@ pub struct GroupResult {
     /// Mean pose error of the episodes recognised within each budget (NaN-free: `None`
     /// where no episode was recognised yet).
     pub pose_error_by_budget: Vec<Option<f64>>,
+    /// Utility against accumulated cost (eq. 15).
+    #[serde(default)]
+    pub curve: UtilityCurve,
     /// Per-episode rows, in plan order.
     pub episodes: Vec<EpisodeRow>,
 }
@@ -208,7 +215,122 @@ pub struct GroupResult {
 /// Largest measurement budget plotted.
 pub const MAX_BUDGET: usize = 30;
 
-fn aggregate(agent: AgentKind, rot_bins: u8, rows: Vec<EpisodeRow>) -> GroupResult {
+/// Points of the utility-vs-cost curves: accumulated cost `0, Δ, …, CURVE_MAX_COST`.
+pub const CURVE_POINTS: usize = 81;
+/// Largest accumulated action cost on the curves (80 rotations and 8 measurements).
+pub const CURVE_MAX_COST: f64 = 0.8;
+/// β values of the Perf(π) = U + β·C table (eq. 15).
+pub const PERF_BETAS: [f64; 4] = [-0.25, -0.5, -1.0, -2.0];
+
+/// Cost of curve point `i`.
+pub fn curve_cost(i: usize) -> f64 {
+    CURVE_MAX_COST * i as f64 / (CURVE_POINTS - 1) as f64
+}
+
+/// One episode's state sampled on the curve's cost grid (the state after the last action
+/// whose accumulated cost is within the grid value; after the episode ended, its final
+/// state).
+#[derive(Clone, Debug, Default)]
+struct EpisodeCurve {
+    entropy: Vec<f32>,
+    recognised: Vec<bool>,
+    pose_error: Vec<Option<f32>>,
+}
+
+/// Records an episode's state after every action for [`EpisodeCurve`]; registers after
+/// every returned range when `register` is set.
+struct CurveRecorder {
+    register: bool,
+    /// (cost, entropy, recognised, pose error so far).
+    samples: Vec<(f32, f32, bool, Option<f32>)>,
+}
+
+impl CurveRecorder {
+    fn observe(&mut self, v: EpisodeView<'_>) {
+        let pipe = v.runner.pipeline();
+        let loc = pipe.localizer();
+        let last = self.samples.last().and_then(|s| s.3);
+        let (cost, recognised) = match v.step {
+            None => (0.0, false),
+            Some(st) => (st.cost, st.coarse_success),
+        };
+        let measured = v.step.is_some_and(|st| st.range.is_some());
+        let pose_error = if self.register && measured {
+            score(v.plan, v.truth, &v.runner.finish(v.plan)).pose_error
+        } else {
+            last
+        };
+        self.samples
+            .push((cost, loc.entropy(), recognised, pose_error));
+    }
+
+    fn curve(&self) -> EpisodeCurve {
+        let mut c = EpisodeCurve::default();
+        let mut k = 0;
+        for i in 0..CURVE_POINTS {
+            let x = curve_cost(i) as f32 + 1e-6;
+            while k + 1 < self.samples.len() && self.samples[k + 1].0 <= x {
+                k += 1;
+            }
+            let s = self
+                .samples
+                .get(k)
+                .copied()
+                .unwrap_or((0.0, 0.0, false, None));
+            c.entropy.push(s.1);
+            c.recognised.push(s.2);
+            c.pose_error.push(s.3);
+        }
+        c
+    }
+}
+
+/// Utility against accumulated action cost (eq. 15), averaged over the plans.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct UtilityCurve {
+    /// Accumulated cost of each point.
+    pub cost: Vec<f64>,
+    /// Mean belief entropy (nats).
+    pub entropy: Vec<f64>,
+    /// Fraction of episodes whose belief argmax is a coarse success at that cost.
+    pub recognition: Vec<f64>,
+    /// Mean pose error of the pipeline's answer at that cost over the episodes recognised
+    /// by then (first `pose_error_plans` plans only; `None` where none is).
+    pub pose_error: Vec<Option<f64>>,
+    /// Plans the pose-error curve averages over.
+    pub pose_error_plans: u32,
+}
+
+fn curve_of(curves: &[EpisodeCurve], pose_error_plans: u32) -> UtilityCurve {
+    let n = curves.len().max(1) as f64;
+    let mut u = UtilityCurve {
+        pose_error_plans,
+        ..Default::default()
+    };
+    for i in 0..CURVE_POINTS {
+        u.cost.push(curve_cost(i));
+        u.entropy
+            .push(curves.iter().map(|c| c.entropy[i] as f64).sum::<f64>() / n);
+        u.recognition
+            .push(curves.iter().filter(|c| c.recognised[i]).count() as f64 / n);
+        let errs: Vec<f64> = curves
+            .iter()
+            .take(pose_error_plans as usize)
+            .filter(|c| c.recognised[i])
+            .filter_map(|c| c.pose_error[i].map(f64::from))
+            .collect();
+        u.pose_error.push(MeanCi::of(&errs).map(|m| m.mean));
+    }
+    u
+}
+
+fn aggregate(
+    agent: AgentKind,
+    rot_bins: u8,
+    rows: Vec<EpisodeRow>,
+    curves: &[EpisodeCurve],
+    curve_plans: u32,
+) -> GroupResult {
     let n = rows.len() as u32;
     let rec = rows.iter().filter(|r| r.recognised).count() as u32;
     let (lo, hi) = wilson(rec, n);
@@ -271,6 +393,7 @@ fn aggregate(agent: AgentKind, rot_bins: u8, rows: Vec<EpisodeRow>) -> GroupResu
         unregistered: rows.iter().filter(|r| r.pose_error.is_none()).count() as u32,
         recognition_by_budget: budget_rec,
         pose_error_by_budget: budget_err,
+        curve: curve_of(curves, curve_plans.min(n)),
         episodes: rows,
     }
 }
@@ -291,9 +414,15 @@ pub struct Timing {
     pub total_s: f64,
     /// Summed episode time per (agent, rot_bins) in report order (s, CPU time across threads).
     pub group_episode_s: Vec<f64>,
+    /// Mean time per decision of the agent per (agent, rot_bins) (ms; the policy alone).
+    #[serde(default)]
+    pub group_decision_ms: Vec<f64>,
     /// Worker threads.
     pub threads: usize,
 }
+
+/// One evaluated episode: group, row, wall time, curve, (decisions, seconds deciding).
+type JobOutput = (usize, EpisodeRow, f64, EpisodeCurve, (u32, f64));
 
 /// Runs the evaluation.
 pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
@@ -319,7 +448,7 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
     } else {
         ProgressBar::hidden()
     };
-    let rows: Vec<(usize, EpisodeRow, f64)> = jobs
+    let rows: Vec<JobOutput> = jobs
         .par_iter()
         .map(|&(g, i)| {
             let (agent, rot_bins) = groups[g];
@@ -333,26 +462,43 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
                 termination: opts.termination,
             };
             let t = Instant::now();
+            let mut rec = CurveRecorder {
+                register: i < opts.curve_plans,
+                samples: Vec::new(),
+            };
             // The policies were loaded for every evaluated setting before the run.
-            let row = EpisodeRow::of(
-                &run_agent_episode(&spec, &opts.policies).expect("policy loaded for every K"),
-            );
+            let (traj, decided) =
+                run_agent_episode_observed(&spec, &opts.policies, &mut |v| rec.observe(v))
+                    .expect("policy loaded for every K");
+            let row = EpisodeRow::of(&traj);
             bar.inc(1);
-            (g, row, t.elapsed().as_secs_f64())
+            (
+                g,
+                row,
+                t.elapsed().as_secs_f64(),
+                rec.curve(),
+                (decided.decisions, decided.seconds),
+            )
         })
         .collect();
     bar.finish_and_clear();
     let mut per_group: Vec<Vec<EpisodeRow>> = vec![Vec::new(); groups.len()];
+    let mut curves: Vec<Vec<EpisodeCurve>> = vec![Vec::new(); groups.len()];
     let mut secs = vec![0.0; groups.len()];
+    let mut decisions = vec![(0u64, 0.0f64); groups.len()];
     // `collect` on an indexed parallel iterator keeps job order, so rows arrive in plan order.
-    for (g, row, s) in rows {
+    for (g, row, s, c, (n, ds)) in rows {
         per_group[g].push(row);
+        curves[g].push(c);
         secs[g] += s;
+        decisions[g].0 += n as u64;
+        decisions[g].1 += ds;
     }
     let results = groups
         .iter()
         .zip(per_group)
-        .map(|(&(a, k), rows)| aggregate(a, k, rows))
+        .zip(&curves)
+        .map(|((&(a, k), rows), c)| aggregate(a, k, rows, c, opts.curve_plans))
         .collect();
     (
         EvalReport {
@@ -362,6 +508,10 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
         Timing {
             total_s: t0.elapsed().as_secs_f64(),
             group_episode_s: secs,
+            group_decision_ms: decisions
+                .iter()
+                .map(|&(n, s)| 1e3 * s / n.max(1) as f64)
+                .collect(),
             threads: rayon::current_num_threads(),
         },
     )
@@ -443,9 +593,9 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         );
         let _ = writeln!(
             s,
-            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | cost | episode time (s) |"
+            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | cost | episode time (s) | time per decision (ms) |"
         );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|");
         for (g, r) in report
             .results
             .iter()
@@ -454,7 +604,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         {
             let _ = writeln!(
                 s,
-                "| {} | {:.3} [{:.3}, {:.3}] | {} [{}, {}] | {} | {} | {} | {:.2} [{:.2}, {:.2}] | {:.2} [{:.2}, {:.2}] | {:.3} | {:.1} |",
+                "| {} | {:.3} [{:.3}, {:.3}] | {} [{}, {}] | {} | {} | {} | {:.2} [{:.2}, {:.2}] | {:.2} [{:.2}, {:.2}] | {:.3} | {:.1} | {:.3} |",
                 r.agent,
                 r.recognition_rate,
                 r.recognition_ci95[0],
@@ -472,10 +622,12 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
                 r.rotations_ci95[0],
                 r.rotations_ci95[1],
                 r.cost,
-                timing.group_episode_s.get(g).copied().unwrap_or(0.0)
+                timing.group_episode_s.get(g).copied().unwrap_or(0.0),
+                timing.group_decision_ms.get(g).copied().unwrap_or(0.0)
             );
         }
         let _ = writeln!(s);
+        perf_table(&mut s, report, k);
     }
     let _ = writeln!(s, "## Side by side with the paper's Table 4\n");
     let _ = writeln!(
@@ -545,6 +697,111 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
     s
 }
 
+/// The Perf(π) = U + β·C table (eq. 15) of one rotation setting: U the recognition rate,
+/// C the mean action cost per episode, β < 0 the price of a unit of cost.
+fn perf_table(s: &mut String, report: &EvalReport, k: u8) {
+    let _ = writeln!(
+        s,
+        "Perf(π) = U + β·C (eq. 15) with U = recognition rate and C = mean action cost per episode, for a few β \
+         (how much recognition one unit of cost is worth); utility-vs-cost curves in `utility-k{k}.svg`.\n"
+    );
+    let mut head = String::from("| agent | U | C |");
+    let mut rule = String::from("|---|---|---|");
+    for b in PERF_BETAS {
+        let _ = write!(head, " β = {b} |");
+        rule.push_str("---|");
+    }
+    let _ = writeln!(s, "{head}\n{rule}");
+    for r in report.results.iter().filter(|r| r.rot_bins == k) {
+        let mut line = format!(
+            "| {} | {:.3} | {:.3} |",
+            r.agent, r.recognition_rate, r.cost
+        );
+        for b in PERF_BETAS {
+            let _ = write!(line, " {:.3} |", r.recognition_rate + b * r.cost);
+        }
+        let _ = writeln!(s, "{line}");
+    }
+    let _ = writeln!(s);
+}
+
+/// The utility-vs-cost curves of one rotation setting: mean belief entropy, recognition and
+/// pose error against accumulated action cost, one line per agent.
+pub fn utility_svg(report: &EvalReport, k: u8) -> String {
+    use crate::plot::{line_panels, LinePanel, Series};
+    let groups: Vec<&GroupResult> = report.results.iter().filter(|r| r.rot_bins == k).collect();
+    let series = |get: &dyn Fn(&UtilityCurve, usize) -> Option<f64>| -> Vec<Series> {
+        groups
+            .iter()
+            .map(|r| Series {
+                name: r.agent.clone(),
+                points: (0..r.curve.cost.len())
+                    .map(|i| (r.curve.cost[i], get(&r.curve, i)))
+                    .collect(),
+            })
+            .collect()
+    };
+    let hmax = groups
+        .iter()
+        .flat_map(|r| r.curve.entropy.iter().copied())
+        .fold(0.0f64, f64::max)
+        .ceil();
+    let emax = {
+        let mut all: Vec<f64> = groups
+            .iter()
+            .flat_map(|r| r.curve.pose_error.iter().flatten().copied())
+            .collect();
+        all.sort_by(f64::total_cmp);
+        let p90 = all.get(all.len() * 9 / 10).copied().unwrap_or(0.1);
+        [0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0]
+            .into_iter()
+            .find(|v| *v >= p90)
+            .unwrap_or(10.0)
+    };
+    let plans = groups.first().map(|r| r.plans).unwrap_or(0);
+    let reg_plans = groups
+        .first()
+        .map(|r| r.curve.pose_error_plans)
+        .unwrap_or(0);
+    let xlabel = "accumulated action cost (measurement 0.05, rotation 0.005)".to_string();
+    let panels = vec![
+        LinePanel {
+            title: "mean belief entropy".into(),
+            xlabel: xlabel.clone(),
+            ylabel: "entropy (nats)".into(),
+            x: (0.0, CURVE_MAX_COST),
+            y: (0.0, hmax.max(1.0)),
+            series: series(&|c, i| Some(c.entropy[i])),
+        },
+        LinePanel {
+            title: "recognition (coarse success so far)".into(),
+            xlabel: xlabel.clone(),
+            ylabel: "fraction of episodes".into(),
+            x: (0.0, CURVE_MAX_COST),
+            y: (0.0, 1.0),
+            series: series(&|c, i| Some(c.recognition[i])),
+        },
+        LinePanel {
+            title: format!("pose error of recognised ({reg_plans} plans)"),
+            xlabel,
+            ylabel: "mean pose error (m)".into(),
+            x: (0.0, CURVE_MAX_COST),
+            y: (0.0, emax),
+            series: series(&|c, i| c.pose_error[i]),
+        },
+    ];
+    let tag = if k == 1 {
+        "1 rotation bin (heading known)".to_string()
+    } else {
+        format!("{k} rotation bins")
+    };
+    line_panels(
+        &format!("Utility against cost, {tag}, {plans} plans"),
+        &panels,
+        3,
+    )
+}
+
 /// (measurement, rotation) costs of the run, for the paper's cost column.
 fn opts_costs(report: &EvalReport) -> (f64, f64) {
     let c = report.options.config.costs;
@@ -559,12 +816,21 @@ pub fn write_outputs(
     command: &str,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let files = [
-        ("results.json", serde_json::to_string_pretty(report)? + "\n"),
-        ("results.md", markdown(report, timing, command)),
-        ("timing.json", serde_json::to_string_pretty(timing)? + "\n"),
-        ("budget.svg", crate::plot::budget_svg(report)),
+    let mut files = vec![
+        (
+            "results.json".to_string(),
+            serde_json::to_string_pretty(report)? + "\n",
+        ),
+        ("results.md".to_string(), markdown(report, timing, command)),
+        (
+            "timing.json".to_string(),
+            serde_json::to_string_pretty(timing)? + "\n",
+        ),
+        ("budget.svg".to_string(), crate::plot::budget_svg(report)),
     ];
+    for &k in &report.options.rot_bins {
+        files.push((format!("utility-k{k}.svg"), utility_svg(report, k)));
+    }
     let mut written = Vec::new();
     for (name, body) in files {
         let p = out.join(name);
@@ -572,6 +838,255 @@ pub fn write_outputs(
         written.push(p);
     }
     Ok(written)
+}
+
+/// Pose error after each measurement beyond the minimal set (paper §4.3's to-do: "how the
+/// final registration error changes with each new measurement action performed after a
+/// minimal set"). The minimal set of an episode is the ranges it had when the oracle rule
+/// would have stopped it (coarse success with the pipeline's minimum number of ranges);
+/// the episode then goes on with the same agent, and the pipeline registers after every
+/// further range.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ExtraReport {
+    /// Options it ran with (termination is overridden to the action limit).
+    pub options: EvalOptions,
+    /// Extra measurements followed.
+    pub extra: usize,
+    /// One entry per (agent, rot_bins).
+    pub results: Vec<ExtraGroup>,
+}
+
+/// One agent and rotation setting of [`ExtraReport`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ExtraGroup {
+    /// Agent name.
+    pub agent: String,
+    /// Rotation bins.
+    pub rot_bins: u8,
+    /// Episodes that reached the minimal set (oracle stop) within the action limit.
+    pub stopped: u32,
+    /// Mean size of the minimal set (ranges).
+    pub minimal_set: f64,
+    /// Per extra measurement `j = 0..=extra`: episodes that got that far.
+    pub episodes: Vec<u32>,
+    /// Mean pose error after `j` extra ranges (m).
+    pub mean: Vec<Option<f64>>,
+    /// Median pose error (m).
+    pub median: Vec<Option<f64>>,
+    /// 90th percentile (m).
+    pub p90: Vec<Option<f64>>,
+}
+
+/// Follows one episode for [`extra_measurements`].
+struct ExtraRecorder {
+    extra: usize,
+    minimal: Option<usize>,
+    errors: Vec<f32>,
+}
+
+impl ExtraRecorder {
+    fn observe(&mut self, v: EpisodeView<'_>) {
+        let Some(step) = v.step else { return };
+        let pipe = v.runner.pipeline();
+        let ranges = pipe.observations().len();
+        let register = match self.minimal {
+            None if step.coarse_success && ranges >= pipe.min_measurements() => {
+                self.minimal = Some(ranges);
+                true
+            }
+            Some(_) => step.range.is_some() && self.errors.len() <= self.extra,
+            None => false,
+        };
+        if register {
+            // A registered episode has a pose; without one there is nothing to follow.
+            if let Some(e) = score(v.plan, v.truth, &v.runner.finish(v.plan)).pose_error {
+                self.errors.push(e);
+            }
+        }
+    }
+}
+
+fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let i = ((sorted.len() - 1) as f64 * q).round() as usize;
+    Some(sorted[i])
+}
+
+/// Runs the extra-measurement analysis (termination forced to the action limit).
+pub fn extra_measurements(opts: &EvalOptions, extra: usize) -> ExtraReport {
+    let groups: Vec<(AgentKind, u8)> = opts
+        .agents
+        .iter()
+        .flat_map(|&a| opts.rot_bins.iter().map(move |&k| (a, k)))
+        .collect();
+    let jobs: Vec<(usize, u32)> = (0..groups.len())
+        .flat_map(|g| (0..opts.plans).map(move |i| (g, i)))
+        .collect();
+    let bar = if opts.progress {
+        let b = ProgressBar::new(jobs.len() as u64);
+        b.set_style(
+            ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:40}] {pos}/{len} episodes ({per_sec}, eta {eta})",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let rows: Vec<(usize, Option<usize>, Vec<f32>)> = jobs
+        .par_iter()
+        .map(|&(g, i)| {
+            let (agent, rot_bins) = groups[g];
+            let spec = EpisodeSpec {
+                plan_seed: opts.first_seed.wrapping_add(i),
+                episode_seed: opts.episode_seed,
+                agent,
+                rot_bins,
+                config: opts.config,
+                sensor: opts.sensor,
+                termination: Termination::ActionLimit,
+            };
+            let mut rec = ExtraRecorder {
+                extra,
+                minimal: None,
+                errors: Vec::new(),
+            };
+            run_agent_episode_observed(&spec, &opts.policies, &mut |v| rec.observe(v))
+                .expect("policy loaded for every K");
+            bar.inc(1);
+            (g, rec.minimal, rec.errors)
+        })
+        .collect();
+    bar.finish_and_clear();
+    let results = groups
+        .iter()
+        .enumerate()
+        .map(|(g, &(a, k))| {
+            let mine: Vec<&(usize, Option<usize>, Vec<f32>)> =
+                rows.iter().filter(|r| r.0 == g).collect();
+            let stopped: Vec<usize> = mine.iter().filter_map(|r| r.1).collect();
+            let mut out = ExtraGroup {
+                agent: a.name().to_string(),
+                rot_bins: k,
+                stopped: stopped.len() as u32,
+                minimal_set: stopped.iter().sum::<usize>() as f64 / stopped.len().max(1) as f64,
+                episodes: Vec::new(),
+                mean: Vec::new(),
+                median: Vec::new(),
+                p90: Vec::new(),
+            };
+            for j in 0..=extra {
+                let mut e: Vec<f64> = mine
+                    .iter()
+                    .filter_map(|r| r.2.get(j).map(|&v| v as f64))
+                    .collect();
+                e.sort_by(f64::total_cmp);
+                out.episodes.push(e.len() as u32);
+                out.mean.push(MeanCi::of(&e).map(|m| m.mean));
+                out.median.push(quantile(&e, 0.5));
+                out.p90.push(quantile(&e, 0.9));
+            }
+            out
+        })
+        .collect();
+    ExtraReport {
+        options: opts.clone(),
+        extra,
+        results,
+    }
+}
+
+/// `extra.md`: one table per rotation setting.
+pub fn extra_markdown(r: &ExtraReport, command: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "# Pose error after each measurement beyond the minimal set\n"
+    );
+    let _ = writeln!(s, "Produced by `{command}`.\n");
+    let _ = writeln!(
+        s,
+        "{} plans from seed {}, action limit {}. The minimal set is the ranges an episode had when the oracle rule \
+         would have stopped it; the agent then carries on and the pipeline registers after every further range. \
+         Cells: mean / median / p90 pose error (m) over the episodes that got that far (their number in the last \
+         column group).\n",
+        r.options.plans, r.options.first_seed, r.options.config.max_actions
+    );
+    for &k in &r.options.rot_bins {
+        let _ = writeln!(s, "## K = {k}\n");
+        let groups: Vec<&ExtraGroup> = r.results.iter().filter(|g| g.rot_bins == k).collect();
+        let mut head = String::from("| extra ranges |");
+        let mut rule = String::from("|---|");
+        for g in &groups {
+            let _ = write!(head, " {} (minimal set {:.2}) |", g.agent, g.minimal_set);
+            rule.push_str("---|");
+        }
+        let _ = writeln!(s, "{head}\n{rule}");
+        for j in 0..=r.extra {
+            let mut line = format!("| +{j} |");
+            for g in &groups {
+                let _ = write!(
+                    line,
+                    " {} / {} / {} (n = {}) |",
+                    opt(g.mean[j], 4),
+                    opt(g.median[j], 4),
+                    opt(g.p90[j], 4),
+                    g.episodes[j]
+                );
+            }
+            let _ = writeln!(s, "{line}");
+        }
+        let _ = writeln!(s);
+    }
+    s
+}
+
+/// `extra.svg`: mean and median pose error against extra ranges, per rotation setting.
+pub fn extra_svg(r: &ExtraReport) -> String {
+    use crate::plot::{line_panels, LinePanel, Series};
+    let mut panels = Vec::new();
+    for &k in &r.options.rot_bins {
+        let groups: Vec<&ExtraGroup> = r.results.iter().filter(|g| g.rot_bins == k).collect();
+        for (what, get) in [
+            (
+                "mean",
+                &(|g: &ExtraGroup, j: usize| g.mean[j])
+                    as &dyn Fn(&ExtraGroup, usize) -> Option<f64>,
+            ),
+            ("median", &|g: &ExtraGroup, j: usize| g.median[j]),
+        ] {
+            let ymax = groups
+                .iter()
+                .flat_map(|g| (0..=r.extra).filter_map(|j| get(g, j)))
+                .fold(0.0f64, f64::max);
+            panels.push(LinePanel {
+                title: format!("{what} pose error, K = {k}"),
+                xlabel: "ranges beyond the minimal set".into(),
+                ylabel: format!("{what} pose error (m)"),
+                x: (0.0, r.extra as f64),
+                y: (0.0, ymax * 1.05),
+                series: groups
+                    .iter()
+                    .map(|g| Series {
+                        name: g.agent.clone(),
+                        points: (0..=r.extra).map(|j| (j as f64, get(g, j))).collect(),
+                    })
+                    .collect(),
+            });
+        }
+    }
+    line_panels(
+        &format!(
+            "Pose error after each measurement beyond the minimal set ({} plans)",
+            r.options.plans
+        ),
+        &panels,
+        2,
+    )
 }
 
 #[cfg(test)]
@@ -591,6 +1106,7 @@ mod tests {
             policy_files: Vec::new(),
             policies: Policies::default(),
             progress: false,
+            curve_plans: 3,
         }
     }
 

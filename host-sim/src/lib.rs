@@ -16,6 +16,7 @@ pub mod classical;
 pub mod device;
 pub mod episode;
 pub mod eval;
+pub mod greedy;
 pub mod learn;
 pub mod link;
 pub mod plans;

@@ -199,6 +199,15 @@ struct EvalArgs {
     /// Do not draw a progress bar.
     #[arg(long)]
     no_progress: bool,
+    /// The pose-error-vs-cost curve (utility-k{K}.svg) registers after every measurement of
+    /// the first N plans (the entropy and recognition curves use all plans).
+    #[arg(long, default_value_t = 200)]
+    curve_plans: u32,
+    /// Instead of Table 4: follow every episode past the point where the oracle rule would
+    /// stop it for N more ranges, registering after each (writes extra.json, extra.md and
+    /// extra.svg; episodes run to --max-actions, so give room, e.g. --max-actions 300).
+    #[arg(long)]
+    extra_measurements: Option<usize>,
 }
 
 #[derive(Clone)]
@@ -391,7 +400,15 @@ fn cmd_bench_registration(a: BenchRegistrationArgs) -> Result<()> {
 
 fn cmd_policy_quantize(a: QuantizeArgs) -> Result<()> {
     use activesense_sim::learn::{file, quantize};
-    let (net, _) = file::load(&a.policy).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let (net, meta) = file::load(&a.policy).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mask = activesense_sim::learn::agent::InputMask::of_metadata(&meta);
+    if mask != activesense_sim::learn::agent::InputMask::Full {
+        bail!(
+            "{} is an ablation trained on '{}' inputs; the instrument's int8 policy shows the network every input, so only full-input policies can be quantised",
+            a.policy.display(),
+            mask.name()
+        );
+    }
     let (blob, r) = quantize::quantize_calibrated(&net, a.calibration_episodes, a.seed);
     std::fs::write(&a.out, &blob).with_context(|| format!("cannot write {}", a.out.display()))?;
     println!(
@@ -717,6 +734,7 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
         policy_files: Vec::new(),
         policies: Policies::default(),
         progress: !a.no_progress && std::io::stderr().is_terminal(),
+        curve_plans: a.curve_plans,
     };
     let mut opts = opts;
     if opts.agents.contains(&AgentKind::Learnt) {
@@ -736,6 +754,31 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
         .chain(opts.policies.int8().map(|p| p.describe()))
         .collect();
     let command = command_line();
+    if let Some(extra) = a.extra_measurements {
+        eprintln!(
+            "following {} agent(s) x {} rotation setting(s) x {} plans for {extra} ranges past the minimal set",
+            opts.agents.len(),
+            opts.rot_bins.len(),
+            opts.plans
+        );
+        let t0 = std::time::Instant::now();
+        let report = eval::extra_measurements(&opts, extra);
+        std::fs::create_dir_all(&a.out)
+            .with_context(|| format!("cannot create {}", a.out.display()))?;
+        let md = eval::extra_markdown(&report, &command);
+        for (name, body) in [
+            ("extra.json", serde_json::to_string_pretty(&report)? + "\n"),
+            ("extra.md", md.clone()),
+            ("extra.svg", eval::extra_svg(&report)),
+        ] {
+            let p = a.out.join(name);
+            std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
+            println!("wrote {}", p.display());
+        }
+        print!("{md}");
+        println!("{:.1} s wall time", t0.elapsed().as_secs_f64());
+        return Ok(());
+    }
     eprintln!(
         "evaluating {} agent(s) x {} rotation setting(s) x {} plans = {} episodes",
         opts.agents.len(),
@@ -834,6 +877,19 @@ struct TrainArgs {
     /// Updates between log lines.
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
     log_every: u64,
+    /// Inputs the network is shown: `full`, or the §4.4 ablations `no-scans` (topological
+    /// scans zeroed) and `no-belief` (belief map zeroed: scans and history only).
+    #[arg(long, default_value = "full", value_parser = parse_inputs)]
+    inputs: activesense_sim::learn::agent::InputMask,
+    /// Scale of the clipped quadratic registration-error reward (0 = the §4.4 ablation
+    /// without the final-registration-error term).
+    #[arg(long, default_value_t = 1.0)]
+    registration_reward: f32,
+}
+
+fn parse_inputs(s: &str) -> Result<activesense_sim::learn::agent::InputMask, String> {
+    activesense_sim::learn::agent::InputMask::from_name(s)
+        .ok_or_else(|| format!("unknown input set '{s}' (expected full, no-scans or no-belief)"))
 }
 
 fn cmd_train(a: TrainArgs) -> Result<()> {
@@ -860,6 +916,8 @@ fn cmd_train(a: TrainArgs) -> Result<()> {
     hp.learning_rate = a.lr;
     hp.ent_coef = a.ent_coef;
     hp.log_every = a.log_every;
+    hp.inputs = a.inputs;
+    hp.registration_reward = a.registration_reward;
     let init = match &a.init {
         Some(p) => Some(file::load_expecting(p, a.rot_bins, shape_for(a.rot_bins).side)?.0),
         None => None,

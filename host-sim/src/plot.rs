@@ -5,8 +5,9 @@
 use crate::eval::{EvalReport, MAX_BUDGET};
 use std::fmt::Write;
 
-const COLOURS: [&str; 8] = [
+const COLOURS: [&str; 12] = [
     "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d", "#666666",
+    "#1f78b4", "#b15928", "#6a3d9a", "#000000",
 ];
 const PANEL_W: f64 = 420.0;
 const PANEL_H: f64 = 260.0;
@@ -206,4 +207,177 @@ pub fn budget_svg(report: &EvalReport) -> String {
     }
     s.push_str("</svg>\n");
     s
+}
+
+/// One line of a [`line_panels`] chart: a name and its points (`None` leaves a gap).
+pub struct Series {
+    /// Legend label.
+    pub name: String,
+    /// (x, y) points in x order.
+    pub points: Vec<(f64, Option<f64>)>,
+}
+
+/// One panel of a [`line_panels`] chart.
+pub struct LinePanel {
+    /// Title above the panel.
+    pub title: String,
+    /// Label of the x axis.
+    pub xlabel: String,
+    /// Label of the y axis.
+    pub ylabel: String,
+    /// x range.
+    pub x: (f64, f64),
+    /// y range (values outside are clipped to the edge).
+    pub y: (f64, f64),
+    /// The lines, in legend order (the same names in every panel get the same colour).
+    pub series: Vec<Series>,
+}
+
+/// Renders panels side by side (`columns` per row) with one shared legend: the utility-vs-
+/// cost curves and the extra-measurement plot.
+pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String {
+    let columns = columns.max(1);
+    let rows = panels.len().div_ceil(columns);
+    let mut names: Vec<&str> = Vec::new();
+    for p in panels {
+        for sr in &p.series {
+            if !names.contains(&sr.name.as_str()) {
+                names.push(&sr.name);
+            }
+        }
+    }
+    let width = LEFT + columns as f64 * (PANEL_W + GAP_X) + 80.0;
+    let height =
+        (TOP + rows as f64 * (PANEL_H + GAP_Y) + 20.0).max(TOP + 40.0 + 20.0 * names.len() as f64);
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
+    );
+    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
+    let _ = writeln!(
+        s,
+        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">{}</text>"#,
+        xml(title)
+    );
+    for (i, p) in panels.iter().enumerate() {
+        let x0 = LEFT + (i % columns) as f64 * (PANEL_W + GAP_X);
+        let y0 = TOP + 20.0 + (i / columns) as f64 * (PANEL_H + GAP_Y);
+        let (xa, xb) = (p.x.0, if p.x.1 > p.x.0 { p.x.1 } else { p.x.0 + 1.0 });
+        let (ya, yb) = (p.y.0, if p.y.1 > p.y.0 { p.y.1 } else { p.y.0 + 1.0 });
+        let px = |x: f64, y: f64| {
+            (
+                x0 + (x - xa) / (xb - xa) * PANEL_W,
+                y0 + PANEL_H - ((y - ya) / (yb - ya)).clamp(0.0, 1.0) * PANEL_H,
+            )
+        };
+        let _ = writeln!(
+            s,
+            r##"<rect x="{x0:.1}" y="{y0:.1}" width="{PANEL_W}" height="{PANEL_H}" fill="none" stroke="#444"/>"##
+        );
+        let _ = writeln!(
+            s,
+            r#"<text x="{:.1}" y="{:.1}" font-weight="bold" text-anchor="middle">{}</text>"#,
+            x0 + PANEL_W / 2.0,
+            y0 - 10.0,
+            xml(&p.title)
+        );
+        for k in 0..=4 {
+            let yv = ya + (yb - ya) * k as f64 / 4.0;
+            let (_, y) = px(xa, yv);
+            let _ = writeln!(
+                s,
+                r##"<line x1="{x0:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end" font-size="11">{}</text>"##,
+                x0 + PANEL_W,
+                x0 - 6.0,
+                y + 4.0,
+                tick(yv)
+            );
+            let xv = xa + (xb - xa) * k as f64 / 4.0;
+            let (x, y) = px(xv, ya);
+            let _ = writeln!(
+                s,
+                r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle" font-size="11">{}</text>"#,
+                y + 16.0,
+                tick(xv)
+            );
+        }
+        let _ = writeln!(
+            s,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="12">{}</text>"#,
+            x0 + PANEL_W / 2.0,
+            y0 + PANEL_H + 34.0,
+            xml(&p.xlabel)
+        );
+        let _ = writeln!(
+            s,
+            r#"<text transform="translate({:.1},{:.1}) rotate(-90)" text-anchor="middle" font-size="12">{}</text>"#,
+            x0 - 48.0,
+            y0 + PANEL_H / 2.0,
+            xml(&p.ylabel)
+        );
+        for sr in &p.series {
+            let ci = names.iter().position(|n| *n == sr.name).unwrap_or(0);
+            let c = COLOURS[ci % COLOURS.len()];
+            // One polyline per gap-free run.
+            let mut run: Vec<String> = Vec::new();
+            let flush = |run: &mut Vec<String>, s: &mut String| {
+                if run.len() > 1 {
+                    let _ = writeln!(
+                        s,
+                        r#"<polyline points="{}" fill="none" stroke="{c}" stroke-width="2"/>"#,
+                        run.join(" ")
+                    );
+                } else if let Some(pt) = run.first() {
+                    let mut xy = pt.split(',');
+                    let (x, y) = (xy.next().unwrap_or("0"), xy.next().unwrap_or("0"));
+                    let _ = writeln!(s, r#"<circle cx="{x}" cy="{y}" r="2.5" fill="{c}"/>"#);
+                }
+                run.clear();
+            };
+            for &(x, y) in &sr.points {
+                match y {
+                    Some(y) if y.is_finite() => {
+                        let (x, y) = px(x, y);
+                        run.push(format!("{x:.1},{y:.1}"));
+                    }
+                    _ => flush(&mut run, &mut s),
+                }
+            }
+            flush(&mut run, &mut s);
+        }
+    }
+    let lx = LEFT + columns as f64 * (PANEL_W + GAP_X) - GAP_X + 20.0;
+    for (i, name) in names.iter().enumerate() {
+        let y = TOP + 30.0 + i as f64 * 20.0;
+        let c = COLOURS[i % COLOURS.len()];
+        let _ = writeln!(
+            s,
+            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{c}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{}</text>"#,
+            lx + 24.0,
+            lx + 30.0,
+            y + 4.0,
+            xml(name)
+        );
+    }
+    let _ = writeln!(s, "</svg>");
+    s
+}
+
+fn tick(v: f64) -> String {
+    if v == 0.0 {
+        "0".into()
+    } else if v.abs() >= 10.0 {
+        format!("{v:.0}")
+    } else if v.abs() >= 1.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.2}")
+    }
+}
+
+fn xml(t: &str) -> String {
+    t.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }

@@ -40,6 +40,72 @@ pub fn features(input: &PolicyInput<'_>, belief: &mut [f32], side: &mut [f32]) {
     input.write_side(side);
 }
 
+/// Which parts of the state a policy is shown (the §4.4 ablations). A masked part is
+/// written as zeros, in training and in evaluation alike, so the network has the same
+/// shape and the same parameter count whatever it is denied.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum InputMask {
+    /// Everything (the committed policies).
+    #[default]
+    Full,
+    /// No topological scans: the `SCAN_HISTORY × 20` scan features are zero.
+    NoScans,
+    /// No belief map: the `K × 30 × 30` map is zero (scans, actions, beam, counters only).
+    NoBelief,
+}
+
+impl InputMask {
+    /// Parses `full`, `no-scans`, `no-belief`.
+    pub fn from_name(s: &str) -> Option<Self> {
+        [InputMask::Full, InputMask::NoScans, InputMask::NoBelief]
+            .into_iter()
+            .find(|m| m.name() == s)
+    }
+
+    /// The name used on the command line and in policy files.
+    pub fn name(self) -> &'static str {
+        match self {
+            InputMask::Full => "full",
+            InputMask::NoScans => "no-scans",
+            InputMask::NoBelief => "no-belief",
+        }
+    }
+
+    /// The mask a policy file was trained with (`hyper_params.inputs`; files from before
+    /// the ablations have none and saw everything).
+    pub fn of_metadata(meta: &serde_json::Value) -> Self {
+        meta.get("hyper_params")
+            .and_then(|h| h.get("inputs"))
+            .and_then(|v| serde_json::from_value(v.clone()).ok())
+            .unwrap_or_default()
+    }
+
+    /// Zeroes the denied inputs in place.
+    pub fn apply(self, belief: &mut [f32], side: &mut [f32]) {
+        match self {
+            InputMask::Full => {}
+            InputMask::NoScans => {
+                let n =
+                    activesense_core::policy::SCAN_HISTORY * activesense_core::episode::SCAN_PIXELS;
+                side[..n].fill(0.0);
+            }
+            InputMask::NoBelief => belief.fill(0.0),
+        }
+    }
+}
+
+/// [`features`] with the denied inputs zeroed.
+pub fn masked_features(
+    input: &PolicyInput<'_>,
+    mask: InputMask,
+    belief: &mut [f32],
+    side: &mut [f32],
+) {
+    features(input, belief, side);
+    mask.apply(belief, side);
+}
+
 /// Index of the largest logit (first on ties).
 pub fn argmax(logits: &[f32; 3]) -> usize {
     let mut best = 0;
@@ -60,6 +126,8 @@ pub struct LearntPolicy {
     pub path: PathBuf,
     /// The file's metadata (training command, seed, …).
     pub meta: serde_json::Value,
+    /// The inputs it was trained on (and is shown when it plays).
+    pub mask: InputMask,
 }
 
 impl LearntPolicy {
@@ -69,6 +137,7 @@ impl LearntPolicy {
         Ok(LearntPolicy {
             net: Arc::new(net),
             path: path.to_path_buf(),
+            mask: InputMask::of_metadata(&meta),
             meta,
         })
     }
@@ -97,7 +166,9 @@ impl LearntPolicy {
 
     /// A fresh agent playing this policy greedily.
     pub fn agent(&self) -> LearntAgent {
-        LearntAgent::new(self.net.clone())
+        let mut a = LearntAgent::new(self.net.clone());
+        a.mask = self.mask;
+        a
     }
 }
 
@@ -117,6 +188,8 @@ pub struct LearntAgent {
     scratch: Scratch,
     belief: Vec<f32>,
     side: Vec<f32>,
+    /// Inputs zeroed before the network sees them (ablated policies).
+    pub mask: InputMask,
     /// Last decision's logits and value (for logs and inspection).
     pub last: Option<([f32; 3], f32)>,
 }
@@ -130,6 +203,7 @@ impl LearntAgent {
             belief: vec![0.0; shape.rot_bins * BELIEF_PLANE],
             side: vec![0.0; SIDE_FEATURES],
             net,
+            mask: InputMask::Full,
             last: None,
         }
     }
@@ -137,7 +211,7 @@ impl LearntAgent {
 
 impl Policy for LearntAgent {
     fn act(&mut self, input: &PolicyInput<'_>) -> Action {
-        features(input, &mut self.belief, &mut self.side);
+        masked_features(input, self.mask, &mut self.belief, &mut self.side);
         let out = self
             .net
             .forward_with(&self.belief, &self.side, &mut self.scratch);
@@ -307,28 +381,104 @@ impl Policies {
     }
 }
 
-/// Runs one episode of `spec.agent`: a baseline from its seed, or the learnt policy for
-/// `spec.rot_bins` from `policies`.
+/// Runs one episode of `spec.agent`: a baseline from its seed, the learnt policy for
+/// `spec.rot_bins` from `policies`, or a greedy benchmark.
 pub fn run_agent_episode(
     spec: &crate::episode::EpisodeSpec,
     policies: &Policies,
 ) -> anyhow::Result<crate::episode::Trajectory> {
-    use activesense_core::agents::AgentKind;
-    match spec.agent {
+    run_agent_episode_timed(spec, policies).map(|(t, _)| t)
+}
+
+/// Time an agent spent deciding in one episode.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DecisionTime {
+    /// Decisions taken.
+    pub decisions: u32,
+    /// Wall time inside the policy (s).
+    pub seconds: f64,
+}
+
+/// Wraps a policy and clocks its decisions.
+struct Timed<'a> {
+    inner: &'a mut dyn Policy,
+    time: DecisionTime,
+}
+
+impl Policy for Timed<'_> {
+    fn act(&mut self, input: &PolicyInput<'_>) -> Action {
+        let t = std::time::Instant::now();
+        let a = self.inner.act(input);
+        self.time.seconds += t.elapsed().as_secs_f64();
+        self.time.decisions += 1;
+        a
+    }
+}
+
+/// [`run_agent_episode`], with the time the agent spent deciding.
+pub fn run_agent_episode_timed(
+    spec: &crate::episode::EpisodeSpec,
+    policies: &Policies,
+) -> anyhow::Result<(crate::episode::Trajectory, DecisionTime)> {
+    run_agent_episode_observed(spec, policies, &mut |_| {})
+}
+
+/// [`run_agent_episode_timed`] with an observer of every step
+/// ([`crate::episode::run_episode_observed`]).
+pub fn run_agent_episode_observed(
+    spec: &crate::episode::EpisodeSpec,
+    policies: &Policies,
+    observe: &mut dyn FnMut(crate::episode::EpisodeView<'_>),
+) -> anyhow::Result<(crate::episode::Trajectory, DecisionTime)> {
+    use activesense_core::agents::{AgentKind, BaselineAgent};
+    let mut timed = |spec: &crate::episode::EpisodeSpec, p: &mut dyn Policy| {
+        let mut t = Timed {
+            inner: p,
+            time: DecisionTime::default(),
+        };
+        let traj = crate::episode::run_episode_observed(spec, &mut t, observe);
+        (traj, t.time)
+    };
+    Ok(match spec.agent {
         AgentKind::Learnt => {
             let p = policies.for_rot_bins(spec.rot_bins).ok_or_else(|| {
                 anyhow::anyhow!("no learnt policy loaded for K = {}", spec.rot_bins)
             })?;
-            Ok(crate::episode::run_episode_with(spec, &mut p.agent()))
+            timed(spec, &mut p.agent())
         }
         AgentKind::LearntInt8 => {
             let p = policies.int8_for(spec.rot_bins).ok_or_else(|| {
                 anyhow::anyhow!("no int8 policy loaded for K = {}", spec.rot_bins)
             })?;
-            Ok(p.with_agent(|agent| crate::episode::run_episode_with(spec, agent)))
+            p.with_agent(|agent| timed(spec, agent))
         }
-        _ => Ok(crate::episode::run_episode(spec)),
-    }
+        AgentKind::Oigm | AgentKind::OigmCost => {
+            // The oracle needs the room and the truth the episode will have: the same
+            // seeds give the same world.
+            let plan = crate::plans::generate(spec.plan_seed);
+            let truth = crate::world::SimWorld::new(
+                plan.clone(),
+                spec.sensor,
+                spec.config,
+                spec.world_seed(),
+            )
+            .truth();
+            let mut agent = crate::greedy::OigmAgent::new(
+                plan,
+                truth,
+                spec.sensor,
+                spec.config,
+                spec.agent == AgentKind::OigmCost,
+            );
+            timed(spec, &mut agent)
+        }
+        AgentKind::Eem => {
+            let plan = crate::plans::generate(spec.plan_seed);
+            let mut agent = crate::greedy::EemAgent::new(plan, spec.sensor, spec.config);
+            timed(spec, &mut agent)
+        }
+        _ => timed(spec, &mut BaselineAgent::new(spec.agent, spec.agent_seed())),
+    })
 }
 
 #[cfg(test)]

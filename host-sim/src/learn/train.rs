@@ -28,7 +28,7 @@
 //! reduced in a fixed chunk order. The same seed gives the same weights byte for byte,
 //! whatever the number of threads.
 
-use super::agent::{action_index, features, shape_for, ACTIONS};
+use super::agent::{action_index, masked_features, shape_for, InputMask, ACTIONS};
 use super::file;
 use super::net::{self, Adam, BatchCache, NetShape, PolicyNet};
 use crate::episode::{score, start_episode, EpisodeSpec, Termination};
@@ -103,6 +103,10 @@ pub struct HyperParams {
     pub log_every: u64,
     /// Updates between checkpoints.
     pub checkpoint_every: u64,
+    /// Inputs the policy is shown (`full`; `no-scans` and `no-belief` are the §4.4
+    /// ablations).
+    #[serde(default)]
+    pub inputs: InputMask,
 }
 
 impl HyperParams {
@@ -133,6 +137,7 @@ impl HyperParams {
             teacher: AgentKind::Heuristic1,
             log_every: 10,
             checkpoint_every: 100,
+            inputs: InputMask::Full,
         }
     }
 
@@ -412,7 +417,7 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
                 .par_chunks_mut(bl)
                 .zip(sides[rows.start * sl..rows.end * sl].par_chunks_mut(sl))
                 .zip(envs.par_iter())
-                .for_each(|((b, s), env)| features(&env.runner.input(), b, s));
+                .for_each(|((b, s), env)| masked_features(&env.runner.input(), hp.inputs, b, s));
             let (logits, v) = net.forward_batch(
                 &beliefs[rows.start * bl..rows.end * bl],
                 &sides[rows.start * sl..rows.end * sl],
@@ -459,7 +464,7 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
             .par_chunks_mut(bl)
             .zip(next_s.par_chunks_mut(sl))
             .zip(envs.par_iter())
-            .for_each(|((b, s), env)| features(&env.runner.input(), b, s));
+            .for_each(|((b, s), env)| masked_features(&env.runner.input(), hp.inputs, b, s));
         let (_, next_v) = net.forward_batch(&next_b, &next_s, e, &mut cache);
         let (advantages, returns) = gae(
             &rewards,
@@ -813,6 +818,7 @@ pub fn write_text(path: &Path, text: &str) -> Result<()> {
 mod tests {
     use super::*;
     use crate::episode::run_episode_with;
+    use crate::learn::agent::features;
     use activesense_core::policy::PolicyInput;
 
     fn tiny(rot_bins: u8, updates: u64, imitation: u64) -> HyperParams {
