@@ -1193,6 +1193,39 @@ mod tests {
     }
 
     #[test]
+    fn host_only_agents_are_refused() {
+        let mut s = Session::new(CFG);
+        call(
+            &mut s,
+            1,
+            &Request::Hello {
+                protocol: PROTOCOL_VERSION,
+            },
+        );
+        call(&mut s, 2, &Request::LoadPlan { vertices: square() });
+        // The float network and the greedy benchmarks live on the host only.
+        let host_only = [
+            AgentKind::Learnt,
+            AgentKind::Oigm,
+            AgentKind::OigmCost,
+            AgentKind::Eem,
+        ];
+        for (seq, agent) in (3..).zip(host_only) {
+            let mut p = params(5);
+            p.agent = agent;
+            assert_eq!(
+                call(&mut s, seq, &Request::StartEpisode(p)),
+                Response::Error(WireError::InvalidParams(ParamError::AgentUnavailable))
+            );
+        }
+        // The session keeps serving: a baseline episode starts.
+        assert!(matches!(
+            call(&mut s, 7, &Request::StartEpisode(params(5))),
+            Response::Act { step: 0, .. }
+        ));
+    }
+
+    #[test]
     fn bad_inputs_get_typed_errors() {
         let mut s = Session::new(CFG);
         call(

@@ -88,6 +88,9 @@ pub struct EpisodeRow {
     pub coarse_error: Option<f32>,
     /// Room symmetry order.
     pub symmetry_order: u8,
+    /// Measurements taken at an encoder bearing already measured in the episode.
+    #[serde(default)]
+    pub repeated_bearings: u16,
 }
 
 impl EpisodeRow {
@@ -101,6 +104,14 @@ impl EpisodeRow {
             pose_error: t.outcome.pose_error,
             coarse_error: t.outcome.coarse_error,
             symmetry_order: t.outcome.symmetry_order,
+            repeated_bearings: {
+                let mut seen = std::collections::BTreeSet::new();
+                t.steps
+                    .iter()
+                    .filter(|st| st.action == activesense_core::agents::Action::Measure)
+                    .filter(|st| !seen.insert(st.bearing_index))
+                    .count() as u16
+            },
         }
     }
 }
@@ -197,6 +208,9 @@ pub struct GroupResult {
     pub rotations_ci95: [f64; 2],
     /// Mean action cost per episode.
     pub cost: f64,
+    /// Fraction of measurements taken at a bearing the episode had already measured.
+    #[serde(default)]
+    pub repeated_bearing_fraction: f64,
     /// Episodes that produced no registration (no measurement returned).
     pub unregistered: u32,
     /// Recognition rate if the episode had been cut after `k + 1` measurements, k = 0..
@@ -390,6 +404,12 @@ fn aggregate(
         rotations: r.mean,
         rotations_ci95: [r.lo, r.hi],
         cost: rows.iter().map(|r| r.cost as f64).sum::<f64>() / n.max(1) as f64,
+        repeated_bearing_fraction: rows.iter().map(|r| r.repeated_bearings as f64).sum::<f64>()
+            / rows
+                .iter()
+                .map(|r| r.measurements as f64)
+                .sum::<f64>()
+                .max(1.0),
         unregistered: rows.iter().filter(|r| r.pose_error.is_none()).count() as u32,
         recognition_by_budget: budget_rec,
         pose_error_by_budget: budget_err,
@@ -593,9 +613,9 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         );
         let _ = writeln!(
             s,
-            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | cost | episode time (s) | time per decision (ms) |"
+            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | cost | repeated bearings | episode time (s) | time per decision (ms) |"
         );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
         for (g, r) in report
             .results
             .iter()
@@ -604,7 +624,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         {
             let _ = writeln!(
                 s,
-                "| {} | {:.3} [{:.3}, {:.3}] | {} [{}, {}] | {} | {} | {} | {:.2} [{:.2}, {:.2}] | {:.2} [{:.2}, {:.2}] | {:.3} | {:.1} | {:.3} |",
+                "| {} | {:.3} [{:.3}, {:.3}] | {} [{}, {}] | {} | {} | {} | {:.2} [{:.2}, {:.2}] | {:.2} [{:.2}, {:.2}] | {:.3} | {:.2} | {:.1} | {:.3} |",
                 r.agent,
                 r.recognition_rate,
                 r.recognition_ci95[0],
@@ -622,6 +642,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
                 r.rotations_ci95[0],
                 r.rotations_ci95[1],
                 r.cost,
+                r.repeated_bearing_fraction,
                 timing.group_episode_s.get(g).copied().unwrap_or(0.0),
                 timing.group_decision_ms.get(g).copied().unwrap_or(0.0)
             );

@@ -114,6 +114,14 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
     if a.rot_bins != 1 && a.rot_bins != 10 {
         bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
     }
+    if a.agent.is_greedy() {
+        bail!(
+            "{} is a host-side benchmark (paper §4.3): OIGM needs the ground truth and EEM ray-casts {} belief hypotheses per bearing, so the instrument does not run them; use `activesense episode` or `activesense eval --agents {}`",
+            a.agent.name(),
+            crate::greedy::EEM_PARTICLES,
+            a.agent.name()
+        );
+    }
     Ok(EpisodeSpec {
         plan_seed,
         episode_seed: a.episode_seed,
