@@ -497,7 +497,7 @@ pub fn markdown(r: &AggregateReport) -> String {
         r.plans, r.first_seed, r.rot_bins, r.policy, r.recognised, r.measure.decisions, r.rotate.decisions, r.measure.empty_maps, r.rotate.empty_maps
     );
     let _ = writeln!(s, "`{}`\n", r.command);
-    s.push_str("| distance from the visual centre (placement radii) | room cells | activation, measure | activation, rotate | belief × activation, measure | belief × activation, rotate | belief, measure | belief, rotate |\n|---|---:|---:|---:|---:|---:|---:|---:|\n");
+    s.push_str("| distance from the visual centre (placement radii) | room cells × decisions | activation, measure | activation, rotate | belief × activation, measure | belief × activation, rotate | belief, measure | belief, rotate |\n|---|---:|---:|---:|---:|---:|---:|---:|\n");
     let mut lo = 0.0;
     for (i, e) in RADIAL_EDGES.iter().enumerate() {
         let range = if e.is_finite() {
