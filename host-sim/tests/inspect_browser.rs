@@ -510,3 +510,47 @@ fn inspect_rejects_what_it_cannot_show() {
     assert!(!dir.join("x.html").exists());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn aggregate_writes_its_pictures_and_numbers() {
+    let dir = scratch("inspect-aggregate");
+    let out = dir.join("fig4");
+    let o = activesense(&[
+        "inspect",
+        "--aggregate",
+        "--agent",
+        "learnt",
+        "--plans",
+        "3",
+        "--no-progress",
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["aggregate.json", "aggregate.md", "grid.svg", "centred.svg"] {
+        assert!(out.join(f).exists(), "{f} written");
+    }
+    let v: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("aggregate.json")).unwrap())
+            .unwrap();
+    assert_eq!(v["plans"], json!(3));
+    let decisions =
+        v["measure"]["decisions"].as_u64().unwrap() + v["rotate"]["decisions"].as_u64().unwrap();
+    assert!(decisions >= 6, "{decisions} decisions in 3 episodes");
+    assert_eq!(v["measure"]["grid_mean"].as_array().unwrap().len(), 30 * 30);
+    // Only the float policy has maps.
+    let o = activesense(&[
+        "inspect",
+        "--aggregate",
+        "--agent",
+        "heuristic-1",
+        "--out",
+        s(&out),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("--agent learnt"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

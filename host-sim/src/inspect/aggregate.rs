@@ -174,7 +174,7 @@ impl Acc {
     }
 }
 
-/// Sums one map (per cell, `[y][x]`, already reduced over channels) normalised by its max.
+/// A map's positive part divided by its maximum; `None` when no value is positive.
 fn normalised(map: &[f32]) -> Option<Vec<f32>> {
     let m = map.iter().copied().fold(0.0f32, f32::max);
     (m > 0.0).then(|| map.iter().map(|v| v.max(0.0) / m).collect())
@@ -278,6 +278,13 @@ pub struct AggregateReport {
     pub episode_seed: u64,
     /// Episodes that ended on coarse success.
     pub recognised: u32,
+    /// Episodes with at least one rotation (§5.1's second observation: the paper's agent
+    /// turns one way only within an episode).
+    pub rotating_episodes: u32,
+    /// Of those, episodes that turned both left and right.
+    pub both_directions: u32,
+    /// Of those, episodes that turned right only.
+    pub right_only: u32,
     /// Upper edges of the radial bins (placement radii; the last is `null` = open).
     pub radial_edges: Vec<Option<f32>>,
     pub measure: KindSums,
@@ -301,7 +308,7 @@ pub fn run(opts: &AggregateOptions, policy: &LearntPolicy, command: &str) -> Agg
     };
     // Per-episode sums come back in plan order and are added in that order: the result
     // does not depend on the thread count.
-    let per: Vec<([Acc; 2], bool)> = (0..opts.plans)
+    let per: Vec<([Acc; 2], bool, [bool; 2])> = (0..opts.plans)
         .into_par_iter()
         .map(|i| {
             let spec = EpisodeSpec {
@@ -315,16 +322,24 @@ pub fn run(opts: &AggregateOptions, policy: &LearntPolicy, command: &str) -> Agg
             };
             let t = record_episode(&spec, policy);
             bar.inc(1);
-            (episode_sums(&t), t.outcome.recognised)
+            let turned = |a| t.steps.iter().any(|s| s.action == a);
+            (
+                episode_sums(&t),
+                t.outcome.recognised,
+                [turned(Action::RotateLeft), turned(Action::RotateRight)],
+            )
         })
         .collect();
     bar.finish_and_clear();
     let (mut measure, mut rotate) = (Acc::new(), Acc::new());
-    let mut recognised = 0;
-    for ([m, r], ok) in &per {
+    let (mut recognised, mut rotating_episodes, mut both_directions, mut right_only) = (0, 0, 0, 0);
+    for ([m, r], ok, [left, right]) in &per {
         measure.add(m);
         rotate.add(r);
         recognised += u32::from(*ok);
+        rotating_episodes += u32::from(*left || *right);
+        both_directions += u32::from(*left && *right);
+        right_only += u32::from(!*left && *right);
     }
     AggregateReport {
         command: command.to_string(),
@@ -334,6 +349,9 @@ pub fn run(opts: &AggregateOptions, policy: &LearntPolicy, command: &str) -> Agg
         first_seed: opts.first_seed,
         episode_seed: opts.episode_seed,
         recognised,
+        rotating_episodes,
+        both_directions,
+        right_only,
         radial_edges: RADIAL_EDGES
             .iter()
             .map(|e| e.is_finite().then_some(*e))
@@ -495,6 +513,14 @@ pub fn markdown(r: &AggregateReport) -> String {
         s,
         "Guided back-propagation over the belief, {} test plans from seed {} (K = {}, policy {}): {} episodes recognised; {} measure and {} rotate decisions ({} / {} with an all-zero map).\n",
         r.plans, r.first_seed, r.rot_bins, r.policy, r.recognised, r.measure.decisions, r.rotate.decisions, r.measure.empty_maps, r.rotate.empty_maps
+    );
+    let _ = writeln!(
+        s,
+        "Rotation directions (§5.1): of {} episodes that rotate, {} turn both left and right, {} right only, {} left only.\n",
+        r.rotating_episodes,
+        r.both_directions,
+        r.right_only,
+        r.rotating_episodes - r.both_directions - r.right_only
     );
     let _ = writeln!(s, "`{}`\n", r.command);
     s.push_str("| distance from the visual centre (placement radii) | room cells × decisions | activation, measure | activation, rotate | belief × activation, measure | belief × activation, rotate | belief, measure | belief, rotate |\n|---|---:|---:|---:|---:|---:|---:|---:|\n");
