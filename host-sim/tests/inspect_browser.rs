@@ -90,7 +90,7 @@ struct Browser {
 
 impl Browser {
     fn launch(exe: &Path, profile: PathBuf) -> Browser {
-        let child = Command::new(exe)
+        let mut child = Command::new(exe)
             .args([
                 "--headless=new",
                 "--no-sandbox",
@@ -108,45 +108,21 @@ impl Browser {
             .stderr(Stdio::null())
             .spawn()
             .expect("start chromium");
-        // Chromium writes the port it chose into DevToolsActivePort.
-        let port_file = profile.join("DevToolsActivePort");
-        let t0 = Instant::now();
-        let port: u16 = loop {
-            if let Ok(text) = std::fs::read_to_string(&port_file) {
-                if let Some(p) = text.lines().next().and_then(|l| l.trim().parse().ok()) {
-                    break p;
-                }
+        // Everything that can fail before the Browser (whose Drop ends Chromium) exists is
+        // done in `connect`; on failure the child is killed here, then the test fails.
+        match connect(&profile) {
+            Ok(ws) => Browser {
+                child,
+                ws,
+                next_id: 0,
+                events: Vec::new(),
+                _profile: profile,
+            },
+            Err(e) => {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!("{e}");
             }
-            assert!(
-                t0.elapsed() < Duration::from_secs(60),
-                "chromium did not open its DevTools port"
-            );
-            std::thread::sleep(Duration::from_millis(100));
-        };
-        let ws_url = loop {
-            let list = http_get(port, "/json/list");
-            let pages: Vec<Value> = serde_json::from_str(&list).unwrap_or_default();
-            if let Some(u) = pages
-                .iter()
-                .find(|p| p["type"] == "page")
-                .and_then(|p| p["webSocketDebuggerUrl"].as_str())
-            {
-                break u.to_string();
-            }
-            assert!(t0.elapsed() < Duration::from_secs(60), "no page target");
-            std::thread::sleep(Duration::from_millis(100));
-        };
-        let stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
-        stream
-            .set_read_timeout(Some(Duration::from_secs(60)))
-            .unwrap();
-        let (ws, _) = tungstenite::client(ws_url.as_str(), stream).expect("websocket handshake");
-        Browser {
-            child,
-            ws,
-            next_id: 0,
-            events: Vec::new(),
-            _profile: profile,
         }
     }
 
@@ -287,6 +263,46 @@ impl Drop for Browser {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
+}
+
+/// Waits for Chromium's DevTools port (it writes the one it chose into DevToolsActivePort),
+/// finds the page target and opens a WebSocket to it.
+fn connect(profile: &Path) -> Result<WebSocket<TcpStream>, String> {
+    let port_file = profile.join("DevToolsActivePort");
+    let t0 = Instant::now();
+    let port: u16 = loop {
+        if let Ok(text) = std::fs::read_to_string(&port_file) {
+            if let Some(p) = text.lines().next().and_then(|l| l.trim().parse().ok()) {
+                break p;
+            }
+        }
+        if t0.elapsed() > Duration::from_secs(60) {
+            return Err("chromium did not open its DevTools port".into());
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let ws_url = loop {
+        let list = http_get(port, "/json/list");
+        let pages: Vec<Value> = serde_json::from_str(&list).unwrap_or_default();
+        if let Some(u) = pages
+            .iter()
+            .find(|p| p["type"] == "page")
+            .and_then(|p| p["webSocketDebuggerUrl"].as_str())
+        {
+            break u.to_string();
+        }
+        if t0.elapsed() > Duration::from_secs(60) {
+            return Err(format!("no page target on DevTools port {port}"));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let stream = TcpStream::connect(("127.0.0.1", port)).map_err(|e| e.to_string())?;
+    stream
+        .set_read_timeout(Some(Duration::from_secs(60)))
+        .map_err(|e| e.to_string())?;
+    let (ws, _) = tungstenite::client(ws_url.as_str(), stream)
+        .map_err(|e| format!("websocket handshake: {e}"))?;
+    Ok(ws)
 }
 
 /// `GET path` on Chromium's DevTools HTTP endpoint (HTTP/1.1: it keeps the connection
