@@ -113,6 +113,50 @@ pub struct StepRecord {
     /// action.
     #[serde(default)]
     pub coarse_success: bool,
+    /// What the learnt policy saw and computed when it chose this action (the inspection
+    /// tool's data, paper §3.5); recorded only for inspected learnt-agent episodes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inspect: Option<StepInspection>,
+}
+
+/// Version of the trajectory JSON ([`Trajectory::format`]). 1 was the unversioned format
+/// before the inspection tool; 2 added `format`, `inspection` and the per-step `inspect`.
+pub const TRAJECTORY_FORMAT: u32 = 2;
+
+/// The state a learnt policy decided on, its outputs and the guided-back-propagation maps of
+/// the chosen action (`docs/ARCHITECTURE.md`, "Trajectory format").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepInspection {
+    /// The belief map fed to the network before the action: `K × 30 × 30`, `[bin][y][x]`,
+    /// probability over the largest probability.
+    pub belief: Vec<f32>,
+    /// The side features fed to the network (`PolicyInput::write_side`: 4 scans × 20 pixels,
+    /// 8 actions × 3 one-hot, cos / sin of the beam, step / 100, measurements / 10).
+    pub side: Vec<f32>,
+    /// Actor logits (rotate-left, rotate-right, measure).
+    pub logits: [f32; 3],
+    /// Softmax of the logits.
+    pub probs: [f32; 3],
+    /// Critic value.
+    pub value: f32,
+    /// Guided back-propagation of the chosen action's logit over the belief (layout of
+    /// `belief`).
+    pub gbp_belief: Vec<f32>,
+    /// Guided back-propagation of the chosen action's logit over the side features.
+    pub gbp_side: Vec<f32>,
+}
+
+/// Trajectory-wide facts the inspection tool needs (present when the steps carry
+/// [`StepInspection`]s).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct InspectionHeader {
+    /// The float policy that acted (file name and checksum).
+    pub policy: String,
+    /// The localizer's pose grid: where belief cell `(x, y)` lies in the model frame (cells
+    /// beyond `nx`, `ny` are padding of the 30 × 30 map).
+    pub grid: activesense_core::localization::grid::GridSpec,
+    /// Side of the belief map (30).
+    pub belief_side: usize,
 }
 
 /// Why an episode ended.
@@ -151,6 +195,8 @@ pub struct Outcome {
 /// A complete episode.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Trajectory {
+    /// Format version, [`TRAJECTORY_FORMAT`].
+    pub format: u32,
     /// What was run.
     pub spec: EpisodeSpec,
     /// The room (model frame).
@@ -169,6 +215,9 @@ pub struct Trajectory {
     pub end: EndReason,
     /// Registration quality.
     pub outcome: Outcome,
+    /// Present in inspected learnt-agent episodes (then every step has `inspect`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inspection: Option<InspectionHeader>,
 }
 
 /// The pipeline parameters of an episode (the ground truth is supplied for the oracle
@@ -273,6 +322,7 @@ pub fn run_episode_observed(
                 None
             },
             coarse_success: pipe.has_belief() && loc.coarse_success(&truth, pipe.symmetry_order()),
+            inspect: None,
         });
         observe(EpisodeView {
             runner: &runner,
@@ -289,6 +339,7 @@ pub fn run_episode_observed(
     let result = runner.finish(&plan);
     let outcome = score(&plan, &truth, &result);
     Trajectory {
+        format: TRAJECTORY_FORMAT,
         spec: spec.clone(),
         truth,
         placement: world.placement(),
@@ -298,6 +349,7 @@ pub fn run_episode_observed(
         summary: *runner.state(),
         end,
         outcome,
+        inspection: None,
     }
 }
 

@@ -5,7 +5,8 @@
 //! trajectory log ([`episode`]), the evaluation harness ([`eval`], [`plot`]) and SVG
 //! rendering ([`svg`]); the classical grid Markov localizer ([`classical`]) and the
 //! localization / registration benchmarks ([`bench_localization`], [`bench_registration`]);
-//! the learned actor-critic policy network and its policy file format ([`learn`]).
+//! the learned actor-critic policy network and its policy file format ([`learn`]); the
+//! inspection tool: trajectory pages and the guided-back-propagation analysis ([`inspect`]).
 //! [`link`], [`device`] and [`remote`] talk the instrument serial protocol
 //! (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a
 //! thread. The `activesense` binary (`src/main.rs`) is the command-line front end.
@@ -17,6 +18,7 @@ pub mod device;
 pub mod episode;
 pub mod eval;
 pub mod greedy;
+pub mod inspect;
 pub mod learn;
 pub mod link;
 pub mod plans;

@@ -56,6 +56,10 @@ enum Command {
     /// instrument, or ask an instrument which policy it runs.
     #[command(subcommand)]
     Policy(PolicyCommand),
+    /// The inspection tool (paper §3.5): a self-contained web page to step through a
+    /// learnt-agent trajectory (episode --agent learnt --json FILE) with a guided
+    /// back-propagation overlay, or (--aggregate) the Fig.-4 analysis over many episodes.
+    Inspect(activesense_sim::inspect::InspectArgs),
 }
 
 #[derive(Subcommand)]
@@ -369,6 +373,7 @@ fn main() -> ExitCode {
         Command::Policy(PolicyCommand::Agreement(a)) => cmd_policy_agreement(a),
         Command::Policy(PolicyCommand::Upload(a)) => activesense_sim::remote::cmd_policy_upload(a),
         Command::Policy(PolicyCommand::Info(a)) => activesense_sim::remote::cmd_policy_info(a),
+        Command::Inspect(a) => activesense_sim::inspect::cmd_inspect(a, &command_line()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -565,7 +570,13 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         AgentKind::LearntInt8 => policies.load_int8(a.int8.as_slice(), &[spec.rot_bins])?,
         _ => {}
     }
-    let t = run_agent_episode(&spec, &policies)?;
+    // The learnt float policy's episodes carry the inspection data (`activesense inspect`).
+    let t = match policies.for_rot_bins(spec.rot_bins) {
+        Some(p) if spec.agent == AgentKind::Learnt => {
+            activesense_sim::inspect::record_episode(&spec, p)
+        }
+        _ => run_agent_episode(&spec, &policies)?,
+    };
     for p in policies.iter() {
         println!("policy: {}", p.path.display());
     }
@@ -647,7 +658,13 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         ),
     }
     if let Some(path) = &a.json {
-        write_file(path, &serde_json::to_string_pretty(&t)?)?;
+        // The inspection arrays (K × 900 floats per step) are written compactly.
+        let text = if t.inspection.is_some() {
+            serde_json::to_string(&t)?
+        } else {
+            serde_json::to_string_pretty(&t)?
+        };
+        write_file(path, &text)?;
         println!("wrote {}", path.display());
     }
     if let Some(path) = &a.svg {

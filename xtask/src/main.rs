@@ -4,7 +4,7 @@
 //!
 //! ```text
 //! cargo xtask ci           # the whole test suite, installing what it needs (what .ci/run calls)
-//! cargo xtask setup        # only the installs: thumbv7em-none-eabihf target, qemu-system-arm
+//! cargo xtask setup        # only the installs: thumbv7em-none-eabihf target, qemu-system-arm, chromium
 //! cargo xtask firmware     # build the firmware ELF (profile `firmware`)
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
 //! cargo xtask mcu-bench [--episodes N] [--agent NAME]  # instructions per update / decision / registration (QEMU -icount)
@@ -56,8 +56,8 @@ fn print_help() {
     println!(
         "cargo xtask <task>\n\n\
          tasks:\n  \
-         ci          whole test suite (installs the thumb target and qemu-system-arm if missing)\n  \
-         setup       install the thumbv7em-none-eabihf target and qemu-system-arm if missing\n  \
+         ci          whole test suite (installs the thumb target, qemu-system-arm and chromium if missing)\n  \
+         setup       install the thumbv7em-none-eabihf target, qemu-system-arm and chromium if missing\n  \
          firmware    build the firmware ELF and print its path\n  \
          qemu-smoke  boot the firmware under qemu-system-arm -M netduinoplus2 and check its boot line\n  \
          qemu-log    decode the firmware's defmt log (smoke boot and one short session)\n  \
@@ -131,7 +131,17 @@ fn setup() -> Result<()> {
     {
         run(Command::new("rustup").args(["target", "add", TARGET]))?;
     }
-    if !have("qemu-system-arm") {
+    // qemu-system-arm runs the firmware; chromium runs the inspection page's browser test
+    // (host-sim/tests/inspect_browser.rs). Both from the distribution's packages.
+    let missing: Vec<&str> = [
+        ("qemu-system-arm", "qemu-system-arm"),
+        ("chromium", "chromium"),
+    ]
+    .into_iter()
+    .filter(|(program, _)| !have(program))
+    .map(|(_, package)| package)
+    .collect();
+    if !missing.is_empty() {
         let sudo = if Command::new("id")
             .arg("-u")
             .output()
@@ -145,7 +155,8 @@ fn setup() -> Result<()> {
         run(Command::new("sh").args([
             "-c",
             &format!(
-                "{sudo}apt-get update -qq && DEBIAN_FRONTEND=noninteractive {sudo}apt-get install -y -qq qemu-system-arm"
+                "{sudo}apt-get update -qq && DEBIAN_FRONTEND=noninteractive {sudo}apt-get install -y -qq {}",
+                missing.join(" ")
             ),
         ]))?;
     }
@@ -315,8 +326,12 @@ fn ci() -> Result<()> {
     ]))?;
     run(cargo().args(["build", "-p", "activesense-core", "--target", TARGET]))?;
     qemu_smoke()?;
-    let (passed, failed, ignored) =
-        test_counted(cargo().args(["test", "--workspace", "--exclude", "activesense-firmware"]))?;
+    // The inspection page's browser test must run here, not skip (setup installed chromium).
+    let (passed, failed, ignored) = test_counted(
+        cargo()
+            .args(["test", "--workspace", "--exclude", "activesense-firmware"])
+            .env("ACTIVESENSE_REQUIRE_BROWSER", "1"),
+    )?;
     // The defmt log decodes on the host (smoke boot and one session).
     qemu_log::run_task()?;
     println!("xtask ci: all green in {:.0} s", t0.elapsed().as_secs_f32());

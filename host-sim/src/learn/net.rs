@@ -368,6 +368,7 @@ impl PolicyNet {
                         Some(grad),
                         scratch,
                         None,
+                        false,
                     );
                 }
             });
@@ -409,6 +410,44 @@ impl PolicyNet {
             None,
             &mut s,
             Some((&mut dbelief, &mut dside)),
+            false,
+        );
+        (dbelief, dside)
+    }
+
+    /// Guided back-propagation (Springenberg et al. 2014) of the logit of `action` to the
+    /// inputs, for one sample: the backward pass of `logits[action]` in which every ReLU
+    /// passes the gradient only where its forward output was positive *and* the incoming
+    /// gradient is positive ([`guided_relu_mask`]). Returns the maps over the belief
+    /// (`K·900`, layout of the input) and over the side features. The inputs themselves are
+    /// not behind a ReLU, so the maps can hold negative values (a negative first-layer
+    /// weight); the inspection tool shows their positive part. Allocates.
+    pub fn guided_backprop(
+        &self,
+        belief: &[f32],
+        side: &[f32],
+        action: usize,
+    ) -> (Vec<f32>, Vec<f32>) {
+        assert!(action < N_ACTIONS, "action {action} out of range");
+        let mut s = Scratch::new(self.shape);
+        self.forward_with(belief, side, &mut s);
+        let mut dbelief = vec![0.0; self.shape.belief_len()];
+        let mut dside = vec![0.0; self.shape.side];
+        let mut dlogits = [0.0; N_ACTIONS];
+        dlogits[action] = 1.0;
+        let acts = std::mem::take(&mut s.acts);
+        backward_sample(
+            &self.shape,
+            &self.params,
+            belief,
+            side,
+            &acts,
+            dlogits,
+            0.0,
+            None,
+            &mut s,
+            Some((&mut dbelief, &mut dside)),
+            true,
         );
         (dbelief, dside)
     }
@@ -680,7 +719,11 @@ fn backward_sample(
     mut grad: Option<&mut [f32]>,
     s: &mut Scratch,
     input_grad: Option<(&mut [f32], &mut [f32])>,
+    guided: bool,
 ) {
+    // Plain backprop masks a ReLU's gradient where its output was 0; guided backprop
+    // (Springenberg et al. 2014) also where the incoming gradient is negative.
+    let mask: fn(&mut [f32], &[f32]) = if guided { guided_relu_mask } else { relu_mask };
     let layers = shape.layers();
     let (a1, rest) = acts.split_at(A1);
     let (a2, rest) = rest.split_at(FLAT);
@@ -708,7 +751,7 @@ fn backward_sample(
         layer_grad(&mut grad, &layers[L_CRITIC]),
         Some(&mut s.dhj),
     );
-    relu_mask(&mut s.dhj, hj);
+    mask(&mut s.dhj, hj);
 
     s.dcat.fill(0.0);
     let (w, _) = split_wb(params, &layers[L_JOINT]);
@@ -719,7 +762,7 @@ fn backward_sample(
         layer_grad(&mut grad, &layers[L_JOINT]),
         Some(&mut s.dcat),
     );
-    relu_mask(&mut s.dcat, hcat);
+    mask(&mut s.dcat, hcat);
     let (dhb, dhs) = s.dcat.split_at(HIDDEN);
 
     let (w, _) = split_wb(params, &layers[L_SIDE]);
@@ -746,7 +789,7 @@ fn backward_sample(
         layer_grad(&mut grad, &layers[L_BELIEF]),
         Some(&mut s.da2),
     );
-    relu_mask(&mut s.da2, a2);
+    mask(&mut s.da2, a2);
     debug_assert_eq!(hb.len(), dhb.len());
 
     // conv2: recompute its im2col from a1 rather than keeping it per sample.
@@ -763,7 +806,7 @@ fn backward_sample(
     );
     s.da1.fill(0.0);
     col2im_add(C1, S1, S2, dcol2, &mut s.da1);
-    relu_mask(&mut s.da1, a1);
+    mask(&mut s.da1, a1);
 
     let (w, _) = split_wb(params, &layers[L_CONV1]);
     im2col(shape.rot_bins, GRID, S1, belief, &mut s.col1);
@@ -857,6 +900,17 @@ fn relu(v: &mut [f32]) {
 fn relu_mask(d: &mut [f32], y: &[f32]) {
     for (di, yi) in d.iter_mut().zip(y) {
         if *yi <= 0.0 {
+            *di = 0.0;
+        }
+    }
+}
+
+/// The guided-back-propagation ReLU rule: the gradient `d` passes where the ReLU output
+/// `y` was positive and `d` itself is positive; everywhere else it becomes 0.
+pub fn guided_relu_mask(d: &mut [f32], y: &[f32]) {
+    debug_assert_eq!(d.len(), y.len());
+    for (di, yi) in d.iter_mut().zip(y) {
+        if *yi <= 0.0 || *di <= 0.0 {
             *di = 0.0;
         }
     }
@@ -1310,6 +1364,250 @@ mod tests {
             skipped * 10 <= checked,
             "{skipped} kinks vs {checked} checked"
         );
+    }
+
+    #[test]
+    fn guided_relu_mask_hand_set_masks() {
+        // Output y > 0 and gradient d > 0: passes; any other combination: blocked. Plain
+        // ReLU backprop (relu_mask) passes the negative gradient of an active unit.
+        let y = [1.0f32, 1.0, 0.0, 0.0, 2.5, 0.0];
+        let d = [0.5f32, -0.5, 0.5, -0.5, 3.0, 0.0];
+        let mut g = d;
+        guided_relu_mask(&mut g, &y);
+        assert_eq!(g, [0.5, 0.0, 0.0, 0.0, 3.0, 0.0]);
+        let mut p = d;
+        relu_mask(&mut p, &y);
+        assert_eq!(p, [0.5, -0.5, 0.0, 0.0, 3.0, 0.0]);
+    }
+
+    /// A network with a handful of nonzero weights, small enough to back-propagate by hand:
+    ///
+    /// ```text
+    /// conv1: a1₀(y,x) = relu(b(2y,2x)),  a1₁(y,x) = relu(2·b(2y,2x))   (kernel centres 1, 2)
+    /// conv2: a2₀(y,x) = relu(a1₀(2y,2x)), a2₁(y,x) = relu(a1₁(2y,2x))  (so a2ᵢ(y,x) ∝ b(4y,4x))
+    /// fc_belief: hb₀ = relu(a2₀(0,1) + a2₁(0,2)) = b(0,4) + 2·b(0,8),  hb₁ = relu(a2₀(0,1)) = b(0,4)
+    /// fc_side:   hs₀ = relu(side₀),  hs₁ = relu(side₁)
+    /// fc_joint:  hj₀ = relu(hb₀ + hs₀),  hj₁ = relu(hb₁ + hs₁)
+    /// actor:     logit₂ (measure) = hj₀ − hj₁,  logit₀ = hj₁;  critic: v = hj₀
+    /// ```
+    ///
+    /// With b(0,4) = 0.5, b(0,8) = 0.25, side = (1, −1): hb = (1, 0.5), hs = (1, 0),
+    /// hj = (2, 0.5), logit₂ = 1.5. For the measure logit the gradient at hj is (1, −1):
+    /// plain backprop carries the −1 down hj₁ → hb₁ → b(0,4), where it cancels the +1 from
+    /// hb₀, so ∂logit₂/∂b(0,4) = 0 and ∂/∂b(0,8) = 2; guided backprop stops the −1 at hj₁,
+    /// so its map is b(0,4): 1, b(0,8): 2, and side: (1, 0) (hs₁ is off in both).
+    fn hand_net() -> PolicyNet {
+        let shape = NetShape {
+            rot_bins: 1,
+            side: 2,
+        };
+        let mut p = vec![0.0f32; shape.param_count()];
+        let l = shape.layers();
+        let centre = 4; // [ky=1][kx=1]
+                        // conv1 weights [out][in=1][3][3]
+        p[l[L_CONV1].offset + centre] = 1.0;
+        p[l[L_CONV1].offset + KK + centre] = 2.0;
+        // conv2 weights [out][in=8][3][3]: out 0 ← in 0, out 1 ← in 1
+        p[l[L_CONV2].offset + centre] = 1.0;
+        p[l[L_CONV2].offset + (C1 + 1) * KK + centre] = 1.0;
+        // fc_belief [32][256]; a2 flat index = c·64 + y·8 + x
+        let fb = l[L_BELIEF].offset;
+        p[fb + 1] = 1.0; // hb0 ← a2₀(0,1)
+        p[fb + 64 + 2] = 1.0; // hb0 ← a2₁(0,2)
+        p[fb + FLAT + 1] = 1.0; // hb1 ← a2₀(0,1)
+                                // fc_side [32][2]
+        let fs = l[L_SIDE].offset;
+        p[fs] = 1.0;
+        p[fs + 2 + 1] = 1.0;
+        // fc_joint [32][64]: input = hb (0..32) | hs (32..64)
+        let fj = l[L_JOINT].offset;
+        p[fj] = 1.0;
+        p[fj + HIDDEN] = 1.0;
+        p[fj + 64 + 1] = 1.0;
+        p[fj + 64 + HIDDEN + 1] = 1.0;
+        // actor [3][32], critic [1][32]
+        let fa = l[L_ACTOR].offset;
+        p[fa + 2 * HIDDEN] = 1.0;
+        p[fa + 2 * HIDDEN + 1] = -1.0;
+        p[fa + 1] = 1.0;
+        p[l[L_CRITIC].offset] = 1.0;
+        PolicyNet::from_params(shape, p).unwrap()
+    }
+
+    #[test]
+    fn guided_backprop_hand_computed_tiny_net() {
+        let net = hand_net();
+        let mut belief = vec![0.0f32; GRID * GRID];
+        belief[4] = 0.5; // b(0,4)
+        belief[8] = 0.25; // b(0,8)
+        let side = [1.0f32, -1.0];
+        let out = net.forward(&belief, &side);
+        assert_eq!(out.logits, [0.5, 0.0, 1.5]);
+        assert_eq!(out.value, 2.0);
+
+        let (gb, gs) = net.guided_backprop(&belief, &side, 2);
+        let mut want = vec![0.0f32; GRID * GRID];
+        want[4] = 1.0;
+        want[8] = 2.0;
+        assert_eq!(gb, want, "guided map over the belief");
+        assert_eq!(gs, [1.0, 0.0], "guided map over the side features");
+
+        // Plain backprop of the same logit: the −1 through hj₁ cancels at b(0,4).
+        let (pb, ps) = net.input_gradient(&belief, &side, [0.0, 0.0, 1.0], 0.0);
+        let mut plain = vec![0.0f32; GRID * GRID];
+        plain[8] = 2.0;
+        assert_eq!(pb, plain);
+        assert_eq!(ps, [1.0, 0.0]);
+
+        // The rotate-left logit (= hj₁): only positive gradients on its path, so guided
+        // and plain agree, b(0,4): 1, side: (0, 0) since hs₁ is off.
+        let (gb0, gs0) = net.guided_backprop(&belief, &side, 0);
+        let mut want0 = vec![0.0f32; GRID * GRID];
+        want0[4] = 1.0;
+        assert_eq!(gb0, want0);
+        assert_eq!(gs0, [0.0, 0.0]);
+        // rotate-right's logit is constant 0: nothing lights up.
+        let (gb1, gs1) = net.guided_backprop(&belief, &side, 1);
+        assert!(gb1.iter().chain(&gs1).all(|&g| g == 0.0));
+    }
+
+    /// Independent f64 guided back-propagation: direct convolutions (no im2col), the
+    /// transposed convolution written out, the guided rule applied at every ReLU.
+    fn reference_guided(
+        shape: &NetShape,
+        p: &[f64],
+        belief: &[f64],
+        side: &[f64],
+        action: usize,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let layers = shape.layers();
+        let dims = |l: &Layer| match l.kind {
+            LayerKind::Conv {
+                in_ch,
+                out_ch,
+                in_size,
+                out_size,
+            } => (in_ch, out_ch, in_size, out_size),
+            _ => panic!("not a conv"),
+        };
+        // Calls f(o, c, out_index, in_index, weight) for every tap inside the input.
+        let taps = |l: &Layer, f: &mut dyn FnMut(usize, usize, f64)| {
+            let (in_ch, out_ch, in_size, out_size) = dims(l);
+            let w = &p[l.weights()];
+            for o in 0..out_ch {
+                for oy in 0..out_size {
+                    for ox in 0..out_size {
+                        for c in 0..in_ch {
+                            for ky in 0..3 {
+                                for kx in 0..3 {
+                                    let iy = (2 * oy + ky) as isize - 1;
+                                    let ix = (2 * ox + kx) as isize - 1;
+                                    if iy < 0
+                                        || ix < 0
+                                        || iy >= in_size as isize
+                                        || ix >= in_size as isize
+                                    {
+                                        continue;
+                                    }
+                                    let oi = (o * out_size + oy) * out_size + ox;
+                                    let ii = (c * in_size + iy as usize) * in_size + ix as usize;
+                                    f(oi, ii, w[((o * in_ch + c) * 3 + ky) * 3 + kx]);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        };
+        let conv = |l: &Layer, x: &[f64]| {
+            let (_, out_ch, _, out_size) = dims(l);
+            let b = &p[l.bias()];
+            let per = out_size * out_size;
+            let mut y: Vec<f64> = (0..out_ch * per).map(|i| b[i / per]).collect();
+            taps(l, &mut |oi, ii, w| y[oi] += w * x[ii]);
+            y.iter().map(|v| v.max(0.0)).collect::<Vec<f64>>()
+        };
+        let conv_back = |l: &Layer, dy: &[f64], n_in: usize| {
+            let mut dx = vec![0.0; n_in];
+            taps(l, &mut |oi, ii, w| dx[ii] += w * dy[oi]);
+            dx
+        };
+        let lin = |l: &Layer, x: &[f64]| {
+            let (w, b) = (&p[l.weights()], &p[l.bias()]);
+            (0..l.bias_len)
+                .map(|o| {
+                    let s = b[o] + (0..x.len()).map(|i| w[o * x.len() + i] * x[i]).sum::<f64>();
+                    if l.relu {
+                        s.max(0.0)
+                    } else {
+                        s
+                    }
+                })
+                .collect::<Vec<f64>>()
+        };
+        let lin_back = |l: &Layer, dy: &[f64], n_in: usize| {
+            let w = &p[l.weights()];
+            (0..n_in)
+                .map(|i| (0..dy.len()).map(|o| w[o * n_in + i] * dy[o]).sum::<f64>())
+                .collect::<Vec<f64>>()
+        };
+        let guide = |d: Vec<f64>, y: &[f64]| {
+            d.iter()
+                .zip(y)
+                .map(|(&d, &y)| if y > 0.0 && d > 0.0 { d } else { 0.0 })
+                .collect::<Vec<f64>>()
+        };
+        let a1 = conv(&layers[L_CONV1], belief);
+        let a2 = conv(&layers[L_CONV2], &a1);
+        let hb = lin(&layers[L_BELIEF], &a2);
+        let hs = lin(&layers[L_SIDE], side);
+        let cat: Vec<f64> = hb.iter().chain(&hs).copied().collect();
+        let hj = lin(&layers[L_JOINT], &cat);
+        let mut dl = [0.0; 3];
+        dl[action] = 1.0;
+        let dhj = guide(lin_back(&layers[L_ACTOR], &dl, HIDDEN), &hj);
+        let dcat = guide(lin_back(&layers[L_JOINT], &dhj, 2 * HIDDEN), &cat);
+        let dside = lin_back(&layers[L_SIDE], &dcat[HIDDEN..], side.len());
+        let da2 = guide(lin_back(&layers[L_BELIEF], &dcat[..HIDDEN], FLAT), &a2);
+        let da1 = guide(conv_back(&layers[L_CONV2], &da2, A1), &a1);
+        let dbelief = conv_back(&layers[L_CONV1], &da1, belief.len());
+        (dbelief, dside)
+    }
+
+    #[test]
+    fn guided_backprop_matches_f64_reference_on_the_real_shape() {
+        let net = lively_net(REAL, 61);
+        let (belief, side) = random_inputs(REAL, 1, 62);
+        let p = to64(&net.params);
+        for action in 0..N_ACTIONS {
+            let (gb, gs) = net.guided_backprop(&belief, &side, action);
+            let (rb, rs) = reference_guided(&REAL, &p, &to64(&belief), &to64(&side), action);
+            let scale = rb.iter().chain(&rs).fold(0.0f64, |m, x| m.max(x.abs()));
+            assert!(scale > 1e-3, "degenerate guided map for action {action}");
+            for (i, (a, r)) in gb.iter().zip(&rb).chain(gs.iter().zip(&rs)).enumerate() {
+                assert!(
+                    (f64::from(*a) - r).abs() <= 1e-4 * scale,
+                    "action {action} input {i}: {a} vs {r}"
+                );
+            }
+            // Guided is not plain backprop here: some negative gradient was stopped.
+            let (pb, _) = net.input_gradient(&belief, &side, dl_onehot(action), 0.0);
+            let differ = gb
+                .iter()
+                .zip(&pb)
+                .filter(|(g, p)| (*g - *p).abs() > 1e-6)
+                .count();
+            assert!(
+                differ > 100,
+                "action {action}: guided equals plain on all but {differ}"
+            );
+        }
+    }
+
+    fn dl_onehot(action: usize) -> [f32; N_ACTIONS] {
+        let mut d = [0.0; N_ACTIONS];
+        d[action] = 1.0;
+        d
     }
 
     #[test]

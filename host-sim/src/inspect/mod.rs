@@ -1,0 +1,380 @@
+//! The inspection tool (paper §3.5, Fig. 4, §5.1): record what the learnt policy saw and
+//! computed at every step of an episode, and turn that state trajectory into one
+//! self-contained web page to step through it, with a guided-back-propagation view
+//! (Springenberg et al. 2014) of which parts of the state drove each chosen action.
+//!
+//! - [`record_episode`]: plays the float policy greedily (the same actions as
+//!   [`crate::learn::agent::LearntAgent`]) and stores, per step, the belief map (all rotation
+//!   channels), the side features (scans, action history, beam, step, measurements), the
+//!   logits, action probabilities and value, and the guided-back-propagation maps of the
+//!   chosen action's logit over the belief and the side features
+//!   ([`crate::learn::net::PolicyNet::guided_backprop`]).
+//! - [`load_trajectory`]: reads a trajectory JSON written by `activesense episode --json`,
+//!   refusing another format version or a broken file with one line naming the file.
+//! - [`render_page`]: the HTML page (inline CSS and JavaScript written in this repository,
+//!   `page.html`, `page.css`, `page.js`; no network access).
+//! - [`aggregate`]: the Fig.-4 analysis over many test-plan episodes.
+
+pub mod aggregate;
+
+use crate::episode::{
+    run_episode_with, EpisodeSpec, InspectionHeader, StepInspection, Trajectory, TRAJECTORY_FORMAT,
+};
+use crate::learn::agent::{argmax, masked_features, InputMask, LearntPolicy, ACTIONS};
+use crate::learn::net::{softmax, PolicyNet};
+use activesense_core::agents::Action;
+use activesense_core::localization::grid::GridSpec;
+use activesense_core::policy::{Policy, PolicyInput, BELIEF_SIDE, SIDE_FEATURES};
+use anyhow::{bail, Context, Result};
+use std::path::Path;
+
+/// A greedy float-policy agent that records a [`StepInspection`] per decision.
+pub struct InspectingAgent<'a> {
+    net: &'a PolicyNet,
+    belief: Vec<f32>,
+    side: Vec<f32>,
+    /// One record per decision, in order.
+    pub records: Vec<StepInspection>,
+    /// The localizer's grid, seen at the first decision.
+    pub grid: Option<GridSpec>,
+    /// Inputs zeroed before the network sees them (an ablated policy's mask).
+    pub mask: InputMask,
+}
+
+impl<'a> InspectingAgent<'a> {
+    pub fn new(net: &'a PolicyNet) -> Self {
+        InspectingAgent {
+            net,
+            belief: vec![0.0; net.shape.belief_len()],
+            side: vec![0.0; SIDE_FEATURES],
+            records: Vec::new(),
+            grid: None,
+            mask: InputMask::Full,
+        }
+    }
+}
+
+impl Policy for InspectingAgent<'_> {
+    fn act(&mut self, input: &PolicyInput<'_>) -> Action {
+        if self.grid.is_none() {
+            self.grid = Some(*input.localizer.grid());
+        }
+        masked_features(input, self.mask, &mut self.belief, &mut self.side);
+        let out = self.net.forward(&self.belief, &self.side);
+        let a = argmax(&out.logits);
+        let (gbp_belief, gbp_side) = self.net.guided_backprop(&self.belief, &self.side, a);
+        self.records.push(StepInspection {
+            belief: self.belief.clone(),
+            side: self.side.clone(),
+            logits: out.logits,
+            probs: softmax(&out.logits),
+            value: out.value,
+            gbp_belief,
+            gbp_side,
+        });
+        ACTIONS[a]
+    }
+}
+
+/// Runs `spec` with the float `policy` (greedy, as `--agent learnt` plays) and returns the
+/// trajectory with the inspection data on every step.
+pub fn record_episode(spec: &EpisodeSpec, policy: &LearntPolicy) -> Trajectory {
+    let mut agent = InspectingAgent::new(&policy.net);
+    agent.mask = policy.mask;
+    let mut t = run_episode_with(spec, &mut agent);
+    debug_assert_eq!(agent.records.len(), t.steps.len());
+    for (step, rec) in t.steps.iter_mut().zip(agent.records) {
+        step.inspect = Some(rec);
+    }
+    t.inspection = agent.grid.map(|grid| InspectionHeader {
+        policy: policy.describe(),
+        grid,
+        belief_side: BELIEF_SIDE,
+    });
+    t
+}
+
+/// Reads a trajectory JSON for inspection. Every failure is one line naming the file: not
+/// readable, not JSON, no or another format version, not a trajectory, or one without the
+/// inspection data (a baseline agent's), or with inconsistent array sizes.
+pub fn load_trajectory(path: &Path) -> Result<Trajectory> {
+    let name = path.display();
+    let text = std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("'{name}': {e}"))?;
+    let value: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("'{name}' is not a trajectory (not valid JSON: {e})"))?;
+    let Some(obj) = value.as_object() else {
+        bail!("'{name}' is not a trajectory (the JSON is not an object)");
+    };
+    match obj.get("format") {
+        None if obj.contains_key("steps") => bail!(
+            "'{name}' is a trajectory without a format version (written before format {TRAJECTORY_FORMAT}); record it again with `activesense episode --agent learnt --json FILE`"
+        ),
+        None => bail!("'{name}' is not a trajectory (no format version, no steps)"),
+        Some(v) if v.as_u64() == Some(u64::from(TRAJECTORY_FORMAT)) => {}
+        Some(v) => bail!(
+            "'{name}' is trajectory format {v}, this activesense reads format {TRAJECTORY_FORMAT}; record it again with `activesense episode --agent learnt --json FILE`"
+        ),
+    }
+    let t: Trajectory = serde_json::from_value(value)
+        .map_err(|e| anyhow::anyhow!("'{name}' is a broken trajectory: {e}"))?;
+    let Some(h) = &t.inspection else {
+        bail!(
+            "'{name}' has no inspection data ({} agent); record a learnt-agent episode: `activesense episode --agent learnt --json FILE`",
+            t.spec.agent.name()
+        );
+    };
+    let k = h.grid.rot_bins as usize;
+    let plane = h.belief_side * h.belief_side;
+    if h.belief_side != BELIEF_SIDE || k == 0 || k != t.spec.rot_bins as usize {
+        bail!("'{name}' is a broken trajectory: belief map {0}x{0} with {k} channels does not match K = {1}", h.belief_side, t.spec.rot_bins);
+    }
+    for s in &t.steps {
+        let Some(i) = &s.inspect else {
+            bail!(
+                "'{name}' is a broken trajectory: step {} has no inspection data",
+                s.step
+            );
+        };
+        let ok = i.belief.len() == k * plane
+            && i.gbp_belief.len() == k * plane
+            && i.side.len() == SIDE_FEATURES
+            && i.gbp_side.len() == SIDE_FEATURES
+            && i.belief
+                .iter()
+                .chain(&i.gbp_belief)
+                .chain(&i.side)
+                .chain(&i.gbp_side)
+                .all(|v| v.is_finite());
+        if !ok {
+            bail!(
+                "'{name}' is a broken trajectory: step {} has inspection arrays of the wrong size or non-finite values",
+                s.step
+            );
+        }
+    }
+    if t.steps.is_empty() {
+        bail!("'{name}' is a broken trajectory: no steps");
+    }
+    Ok(t)
+}
+
+const PAGE_HTML: &str = include_str!("page.html");
+const PAGE_CSS: &str = include_str!("page.css");
+const PAGE_JS: &str = include_str!("page.js");
+
+/// The self-contained inspection page for `t` (which must carry inspection data; see
+/// [`load_trajectory`]): the trajectory embedded as JSON, the page's CSS and JavaScript
+/// inline. The same trajectory gives the same bytes.
+pub fn render_page(t: &Trajectory, source: &str) -> Result<String> {
+    let data = serde_json::to_string(t).context("serialising the trajectory")?;
+    // Inside <script> only "</" could end the element early; "<\/" is the same JSON string.
+    let data = data.replace("</", "<\\/");
+    let title = format!(
+        "activesense inspect: plan {} {} K={} ({})",
+        t.spec.plan_seed,
+        t.spec.agent.name(),
+        t.spec.rot_bins,
+        source
+    );
+    Ok(PAGE_HTML
+        .replace("{{TITLE}}", &html_escape(&title))
+        .replace("{{CSS}}", PAGE_CSS)
+        .replace("{{JS}}", PAGE_JS)
+        .replace("{{DATA}}", &data))
+}
+
+/// Escapes text for HTML element content.
+pub fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// `activesense inspect`.
+#[derive(clap::Args, Debug)]
+pub struct InspectArgs {
+    /// Trajectory JSON written by `activesense episode --agent learnt --json FILE` (not with
+    /// --aggregate).
+    pub trajectory: Option<std::path::PathBuf>,
+    /// The HTML page to write; with --aggregate, the output directory.
+    #[arg(long)]
+    pub out: std::path::PathBuf,
+    /// Instead of one page: the Fig.-4 analysis over many test-plan episodes (mean
+    /// normalised guided-back-propagation maps of measure and rotate decisions).
+    #[arg(long)]
+    pub aggregate: bool,
+    /// Agent of the aggregate episodes (only the learnt float policy has maps).
+    #[arg(long, value_parser = crate::episode::parse_agent, default_value = "learnt")]
+    pub agent: activesense_core::agents::AgentKind,
+    /// Test plans of the aggregate (seeds from 1000000 on).
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub plans: u32,
+    /// Rotation bins of the aggregate episodes: 1 or 10.
+    #[arg(long, default_value_t = 1)]
+    pub rot_bins: u8,
+    /// Episode seed of the aggregate episodes.
+    #[arg(long, default_value_t = 0)]
+    pub episode_seed: u64,
+    /// Float policy file for the aggregate (default: the committed policies/k{K}/policy.policy).
+    #[arg(long)]
+    pub policy: Option<std::path::PathBuf>,
+    /// Do not draw a progress bar.
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+/// Runs `activesense inspect` (`command`: the command line, recorded in the aggregate).
+pub fn cmd_inspect(a: InspectArgs, command: &str) -> Result<()> {
+    use std::io::IsTerminal;
+    if !a.aggregate {
+        let Some(path) = &a.trajectory else {
+            bail!("give a trajectory JSON (activesense episode --agent learnt --json FILE), or --aggregate");
+        };
+        write_page(path, &a.out)?;
+        println!("wrote {}", a.out.display());
+        return Ok(());
+    }
+    if let Some(p) = &a.trajectory {
+        bail!(
+            "--aggregate runs its own episodes; do not give a trajectory ('{}')",
+            p.display()
+        );
+    }
+    if a.agent != activesense_core::agents::AgentKind::Learnt {
+        bail!(
+            "--aggregate needs --agent learnt (only the float policy has guided back-propagation maps), got {}",
+            a.agent.name()
+        );
+    }
+    if a.rot_bins != 1 && a.rot_bins != 10 {
+        bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
+    }
+    let path = a
+        .policy
+        .clone()
+        .unwrap_or_else(|| crate::learn::agent::default_policy_path(a.rot_bins));
+    let policy = LearntPolicy::load(&path, a.rot_bins)?;
+    let opts = aggregate::AggregateOptions {
+        plans: a.plans,
+        episode_seed: a.episode_seed,
+        rot_bins: a.rot_bins,
+        progress: !a.no_progress && std::io::stderr().is_terminal(),
+        ..Default::default()
+    };
+    aggregate::cmd(&opts, &policy, &a.out, command)
+}
+
+/// `activesense inspect TRAJECTORY --out PAGE`.
+pub fn write_page(trajectory: &Path, out: &Path) -> Result<()> {
+    let t = load_trajectory(trajectory)?;
+    let source = trajectory
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let page = render_page(&t, &source)?;
+    std::fs::write(out, page).with_context(|| format!("cannot write {}", out.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::learn::agent::{default_policy_path, run_agent_episode, Policies};
+    use crate::plans;
+    use activesense_core::agents::AgentKind;
+
+    fn scratch(name: &str) -> std::path::PathBuf {
+        let d =
+            std::env::temp_dir().join(format!("activesense-inspect-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn recorded_episode_plays_like_the_learnt_agent_and_carries_consistent_maps() {
+        let policy = LearntPolicy::load(&default_policy_path(1), 1).unwrap();
+        let mut spec = EpisodeSpec::new(plans::TEST_SEEDS.start + 5, AgentKind::Learnt);
+        spec.episode_seed = 2;
+        let t = record_episode(&spec, &policy);
+        let policies = Policies::load(&[], &[1]).unwrap();
+        let plain = run_agent_episode(&spec, &policies).unwrap();
+        let actions = |t: &Trajectory| t.steps.iter().map(|s| s.action).collect::<Vec<_>>();
+        assert_eq!(actions(&t), actions(&plain), "recording changes no action");
+        assert!(plain.steps.iter().all(|s| s.inspect.is_none()));
+        assert!(t.steps.len() >= 2);
+        for s in &t.steps {
+            let i = s.inspect.as_ref().unwrap();
+            // The chosen action is the most probable, and its map is the guided one.
+            let a = crate::learn::agent::action_index(s.action);
+            assert_eq!(argmax(&i.logits), a);
+            assert!((i.probs.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+            let (gb, gs) = policy.net.guided_backprop(&i.belief, &i.side, a);
+            assert_eq!(gb, i.gbp_belief);
+            assert_eq!(gs, i.gbp_side);
+        }
+        // Deterministic: the same page twice; and the page round-trips through a file.
+        let dir = scratch("roundtrip");
+        let f = dir.join("run.json");
+        std::fs::write(&f, serde_json::to_string(&t).unwrap()).unwrap();
+        let back = load_trajectory(&f).unwrap();
+        assert_eq!(
+            render_page(&back, "run.json").unwrap(),
+            render_page(&t, "run.json").unwrap()
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn wrong_files_are_one_line_errors_naming_the_file() {
+        let dir = scratch("errors");
+        let policy = LearntPolicy::load(&default_policy_path(1), 1).unwrap();
+        let spec = EpisodeSpec::new(plans::TEST_SEEDS.start + 1, AgentKind::Learnt);
+        let good = serde_json::to_value(record_episode(&spec, &policy)).unwrap();
+        let check = |name: &str, text: String, want: &str| {
+            let f = dir.join(name);
+            std::fs::write(&f, text).unwrap();
+            let e = format!("{:#}", load_trajectory(&f).unwrap_err());
+            assert!(e.contains(name) && e.contains(want), "{name}: {e}");
+            assert!(!e.contains('\n'), "{name}: not one line: {e}");
+        };
+        check("missing.json", String::new(), "not valid JSON");
+        check("list.json", "[1, 2]".into(), "not an object");
+        let mut v = good.clone();
+        v["format"] = 1.into();
+        check("old.json", v.to_string(), "format 1");
+        let mut v = good.clone();
+        v.as_object_mut().unwrap().remove("format");
+        check(
+            "unversioned.json",
+            v.to_string(),
+            "without a format version",
+        );
+        let mut v = good.clone();
+        v["steps"][0]["inspect"]["belief"] = serde_json::json!([0.5]);
+        check("short.json", v.to_string(), "wrong size");
+        let mut v = good.clone();
+        v["steps"][0]["action"] = "Jump".into();
+        check("action.json", v.to_string(), "broken trajectory");
+        let text = good.to_string();
+        check(
+            "truncated.json",
+            text[..text.len() / 2].into(),
+            "not valid JSON",
+        );
+        let base = crate::episode::run_episode(&EpisodeSpec::new(
+            plans::TEST_SEEDS.start,
+            AgentKind::Heuristic1,
+        ));
+        check(
+            "baseline.json",
+            serde_json::to_string(&base).unwrap(),
+            "no inspection data",
+        );
+        let e = format!(
+            "{:#}",
+            load_trajectory(&dir.join("absent.json")).unwrap_err()
+        );
+        assert!(e.contains("absent.json"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
