@@ -441,33 +441,47 @@ pub struct Timing {
     pub threads: usize,
 }
 
+/// An (agent, rot_bins) group of an evaluation.
+type Group = (AgentKind, u8);
+
+/// The (agent, rot_bins) groups in report order, and one job (group, plan index) per
+/// episode.
+fn groups_and_jobs(opts: &EvalOptions) -> (Vec<Group>, Vec<(usize, u32)>) {
+    let groups: Vec<Group> = opts
+        .agents
+        .iter()
+        .flat_map(|&a| opts.rot_bins.iter().map(move |&k| (a, k)))
+        .collect();
+    let jobs = (0..groups.len())
+        .flat_map(|g| (0..opts.plans).map(move |i| (g, i)))
+        .collect();
+    (groups, jobs)
+}
+
+/// The progress bar of a run of `len` episodes (hidden when `show` is false).
+pub fn episode_bar(len: u64, show: bool) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let b = ProgressBar::new(len);
+    b.set_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:40}] {pos}/{len} episodes ({per_sec}, eta {eta})",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
+    );
+    b
+}
+
 /// One evaluated episode: group, row, wall time, curve, (decisions, seconds deciding).
 type JobOutput = (usize, EpisodeRow, f64, EpisodeCurve, (u32, f64));
 
 /// Runs the evaluation.
 pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
     let t0 = Instant::now();
-    let groups: Vec<(AgentKind, u8)> = opts
-        .agents
-        .iter()
-        .flat_map(|&a| opts.rot_bins.iter().map(move |&k| (a, k)))
-        .collect();
-    let jobs: Vec<(usize, u32)> = (0..groups.len())
-        .flat_map(|g| (0..opts.plans).map(move |i| (g, i)))
-        .collect();
-    let bar = if opts.progress {
-        let b = ProgressBar::new(jobs.len() as u64);
-        b.set_style(
-            ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:40}] {pos}/{len} episodes ({per_sec}, eta {eta})",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        b
-    } else {
-        ProgressBar::hidden()
-    };
+    let (groups, jobs) = groups_and_jobs(opts);
+    let bar = episode_bar(jobs.len() as u64, opts.progress);
     let rows: Vec<JobOutput> = jobs
         .par_iter()
         .map(|&(g, i)| {
@@ -937,27 +951,8 @@ fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
 
 /// Runs the extra-measurement analysis (termination forced to the action limit).
 pub fn extra_measurements(opts: &EvalOptions, extra: usize) -> ExtraReport {
-    let groups: Vec<(AgentKind, u8)> = opts
-        .agents
-        .iter()
-        .flat_map(|&a| opts.rot_bins.iter().map(move |&k| (a, k)))
-        .collect();
-    let jobs: Vec<(usize, u32)> = (0..groups.len())
-        .flat_map(|g| (0..opts.plans).map(move |i| (g, i)))
-        .collect();
-    let bar = if opts.progress {
-        let b = ProgressBar::new(jobs.len() as u64);
-        b.set_style(
-            ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:40}] {pos}/{len} episodes ({per_sec}, eta {eta})",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        b
-    } else {
-        ProgressBar::hidden()
-    };
+    let (groups, jobs) = groups_and_jobs(opts);
+    let bar = episode_bar(jobs.len() as u64, opts.progress);
     let rows: Vec<(usize, Option<usize>, Vec<f32>)> = jobs
         .par_iter()
         .map(|&(g, i)| {

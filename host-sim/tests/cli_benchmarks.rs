@@ -1,30 +1,13 @@
 //! The §4.3 greedy benchmarks, the §4.4 ablations and the eq.-15 curves through the
 //! `activesense` binary, as a user runs them.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::{activesense, s, scratch};
 
-fn activesense(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_activesense"))
-        .args(args)
-        .output()
-        .expect("run activesense")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("activesense-bench-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 #[test]
 fn greedy_agents_evaluate_with_curves_and_decision_times() {
-    let out = scratch("greedy");
+    let out = scratch("bench-greedy");
     let o = activesense(&[
         "eval",
         "--agents",
@@ -71,7 +54,7 @@ fn greedy_agents_evaluate_with_curves_and_decision_times() {
 
 #[test]
 fn extra_measurements_follow_episodes_past_the_oracle_stop() {
-    let out = scratch("extra");
+    let out = scratch("bench-extra");
     let o = activesense(&[
         "eval",
         "--agents",
@@ -129,7 +112,7 @@ fn greedy_agents_are_refused_on_an_instrument_with_a_reason() {
 
 #[test]
 fn ablated_policies_train_and_play_with_their_mask() {
-    let dir = scratch("ablation");
+    let dir = scratch("bench-ablation");
     let out = dir.join("no-scans");
     let o = activesense(&[
         "train",

@@ -2,30 +2,13 @@
 //! run writes a policy, its log and its curve; `eval` and `episode` play that policy; a
 //! corrupt or mismatched policy file is a one-line error naming the file.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
+use common::{activesense, s, scratch};
 
-fn activesense(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_activesense"))
-        .args(args)
-        .output()
-        .expect("run activesense")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("activesense-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 #[test]
 fn train_then_play_the_policy() {
-    let dir = scratch("train");
+    let dir = scratch("cli-train");
     let out = dir.join("run");
     let o = activesense(&[
         "train",
@@ -114,7 +97,7 @@ fn train_then_play_the_policy() {
 
 #[test]
 fn a_corrupt_policy_is_a_clear_error() {
-    let dir = scratch("corrupt");
+    let dir = scratch("cli-corrupt");
     let bad = dir.join("broken.policy");
     std::fs::write(&bad, b"ASPOLICY but not really").unwrap();
     let o = activesense(&[

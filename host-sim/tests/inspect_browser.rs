@@ -10,31 +10,16 @@
 //! xtask ci`), where a missing browser fails. `ACTIVESENSE_INSPECT_PNG=FILE` also writes the
 //! full-page screenshot to FILE (how `docs/inspect.png` is made).
 
+mod common;
+use common::{activesense, s, scratch};
+
 use serde_json::{json, Value};
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use tungstenite::{Message, WebSocket};
-
-fn activesense(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_activesense"))
-        .args(args)
-        .output()
-        .expect("run activesense")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("activesense-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// Records a learnt-agent episode and makes its page; returns the page path.
 fn make_page(dir: &Path, name: &str, seed: &str, rot_bins: &str) -> PathBuf {

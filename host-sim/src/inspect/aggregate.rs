@@ -28,7 +28,6 @@ use activesense_core::episode::EpisodeConfig;
 use activesense_core::geometry::{length, v2};
 use activesense_core::policy::BELIEF_SIDE;
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write;
@@ -293,19 +292,7 @@ pub struct AggregateReport {
 
 /// Runs `opts.plans` learnt-policy episodes with inspection and aggregates their guided maps.
 pub fn run(opts: &AggregateOptions, policy: &LearntPolicy, command: &str) -> AggregateReport {
-    let bar = if opts.progress {
-        let b = ProgressBar::new(u64::from(opts.plans));
-        b.set_style(
-            ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:40}] {pos}/{len} episodes ({per_sec}, eta {eta})",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
-        );
-        b
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = crate::eval::episode_bar(u64::from(opts.plans), opts.progress);
     // Per-episode sums come back in plan order and are added in that order: the result
     // does not depend on the thread count.
     let per: Vec<([Acc; 2], bool, [bool; 2])> = (0..opts.plans)
