@@ -69,6 +69,27 @@ pub struct EvalOptions {
     pub curve_plans: u32,
 }
 
+impl EvalOptions {
+    /// The episode of `agent` with `rot_bins` on the `i`-th plan, stopped by `termination`.
+    pub fn spec(
+        &self,
+        agent: AgentKind,
+        rot_bins: u8,
+        i: u32,
+        termination: Termination,
+    ) -> EpisodeSpec {
+        EpisodeSpec {
+            plan_seed: self.first_seed.wrapping_add(i),
+            episode_seed: self.episode_seed,
+            agent,
+            rot_bins,
+            config: self.config,
+            sensor: self.sensor,
+            termination,
+        }
+    }
+}
+
 /// Summary of one episode kept for aggregation.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct EpisodeRow {
@@ -486,15 +507,7 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
         .par_iter()
         .map(|&(g, i)| {
             let (agent, rot_bins) = groups[g];
-            let spec = EpisodeSpec {
-                plan_seed: opts.first_seed.wrapping_add(i),
-                episode_seed: opts.episode_seed,
-                agent,
-                rot_bins,
-                config: opts.config,
-                sensor: opts.sensor,
-                termination: opts.termination,
-            };
+            let spec = opts.spec(agent, rot_bins, i, opts.termination);
             let t = Instant::now();
             let mut rec = CurveRecorder {
                 register: i < opts.curve_plans,
@@ -957,15 +970,7 @@ pub fn extra_measurements(opts: &EvalOptions, extra: usize) -> ExtraReport {
         .par_iter()
         .map(|&(g, i)| {
             let (agent, rot_bins) = groups[g];
-            let spec = EpisodeSpec {
-                plan_seed: opts.first_seed.wrapping_add(i),
-                episode_seed: opts.episode_seed,
-                agent,
-                rot_bins,
-                config: opts.config,
-                sensor: opts.sensor,
-                termination: Termination::ActionLimit,
-            };
+            let spec = opts.spec(agent, rot_bins, i, Termination::ActionLimit);
             let mut rec = ExtraRecorder {
                 extra,
                 minimal: None,

@@ -4,7 +4,6 @@
 mod common;
 use common::{activesense, s, scratch};
 
-
 #[test]
 fn greedy_agents_evaluate_with_curves_and_decision_times() {
     let out = scratch("bench-greedy");

@@ -5,7 +5,6 @@
 mod common;
 use common::{activesense, s, scratch};
 
-
 #[test]
 fn train_then_play_the_policy() {
     let dir = scratch("cli-train");

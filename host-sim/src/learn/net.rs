@@ -1106,6 +1106,21 @@ mod tests {
 
     /// Independent f64 reference: direct (not im2col) convolution straight from the
     /// documented parameter layout.
+    /// f64 reference of a fully-connected layer (with its ReLU when it has one).
+    fn ref_linear(layer: &Layer, p: &[f64], x: &[f64]) -> Vec<f64> {
+        let (w, b) = (&p[layer.weights()], &p[layer.bias()]);
+        (0..layer.bias_len)
+            .map(|o| {
+                let s = b[o] + (0..x.len()).map(|i| w[o * x.len() + i] * x[i]).sum::<f64>();
+                if layer.relu {
+                    s.max(0.0)
+                } else {
+                    s
+                }
+            })
+            .collect()
+    }
+
     fn reference(shape: &NetShape, p: &[f64], belief: &[f64], side: &[f64]) -> ([f64; 3], f64) {
         let layers = shape.layers();
         let conv = |layer: &Layer, input: &[f64]| {
@@ -1148,19 +1163,7 @@ mod tests {
             }
             out
         };
-        let lin = |layer: &Layer, x: &[f64]| {
-            let (w, b) = (&p[layer.weights()], &p[layer.bias()]);
-            (0..layer.bias_len)
-                .map(|o| {
-                    let s = b[o] + (0..x.len()).map(|i| w[o * x.len() + i] * x[i]).sum::<f64>();
-                    if layer.relu {
-                        s.max(0.0)
-                    } else {
-                        s
-                    }
-                })
-                .collect::<Vec<f64>>()
-        };
+        let lin = |layer: &Layer, x: &[f64]| ref_linear(layer, p, x);
         let a1 = conv(&layers[0], belief);
         let a2 = conv(&layers[1], &a1);
         let mut cat = lin(&layers[2], &a2);
@@ -1532,19 +1535,7 @@ mod tests {
             taps(l, &mut |oi, ii, w| dx[ii] += w * dy[oi]);
             dx
         };
-        let lin = |l: &Layer, x: &[f64]| {
-            let (w, b) = (&p[l.weights()], &p[l.bias()]);
-            (0..l.bias_len)
-                .map(|o| {
-                    let s = b[o] + (0..x.len()).map(|i| w[o * x.len() + i] * x[i]).sum::<f64>();
-                    if l.relu {
-                        s.max(0.0)
-                    } else {
-                        s
-                    }
-                })
-                .collect::<Vec<f64>>()
-        };
+        let lin = |l: &Layer, x: &[f64]| ref_linear(l, p, x);
         let lin_back = |l: &Layer, dy: &[f64], n_in: usize| {
             let w = &p[l.weights()];
             (0..n_in)
