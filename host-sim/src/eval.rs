@@ -923,13 +923,20 @@ pub struct ExtraGroup {
     pub median: Vec<Option<f64>>,
     /// 90th percentile (m).
     pub p90: Vec<Option<f64>>,
+    /// Fraction of those episodes whose belief argmax is still a coarse success.
+    #[serde(default)]
+    pub still_recognised: Vec<f64>,
+    /// Mean pose error over the episodes still recognised (m).
+    #[serde(default)]
+    pub mean_still_recognised: Vec<Option<f64>>,
 }
 
 /// Follows one episode for [`extra_measurements`].
 struct ExtraRecorder {
     extra: usize,
     minimal: Option<usize>,
-    errors: Vec<f32>,
+    /// (pose error, argmax still a coarse success) after each registration.
+    errors: Vec<(f32, bool)>,
 }
 
 impl ExtraRecorder {
@@ -948,7 +955,7 @@ impl ExtraRecorder {
         if register {
             // A registered episode has a pose; without one there is nothing to follow.
             if let Some(e) = score(v.plan, v.truth, &v.runner.finish(v.plan)).pose_error {
-                self.errors.push(e);
+                self.errors.push((e, step.coarse_success));
             }
         }
     }
@@ -962,11 +969,14 @@ fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
     Some(sorted[i])
 }
 
+/// One followed episode: group, minimal-set size, (error, still recognised) per registration.
+type ExtraRow = (usize, Option<usize>, Vec<(f32, bool)>);
+
 /// Runs the extra-measurement analysis (termination forced to the action limit).
 pub fn extra_measurements(opts: &EvalOptions, extra: usize) -> ExtraReport {
     let (groups, jobs) = groups_and_jobs(opts);
     let bar = episode_bar(jobs.len() as u64, opts.progress);
-    let rows: Vec<(usize, Option<usize>, Vec<f32>)> = jobs
+    let rows: Vec<ExtraRow> = jobs
         .par_iter()
         .map(|&(g, i)| {
             let (agent, rot_bins) = groups[g];
@@ -987,8 +997,7 @@ pub fn extra_measurements(opts: &EvalOptions, extra: usize) -> ExtraReport {
         .iter()
         .enumerate()
         .map(|(g, &(a, k))| {
-            let mine: Vec<&(usize, Option<usize>, Vec<f32>)> =
-                rows.iter().filter(|r| r.0 == g).collect();
+            let mine: Vec<&ExtraRow> = rows.iter().filter(|r| r.0 == g).collect();
             let stopped: Vec<usize> = mine.iter().filter_map(|r| r.1).collect();
             let mut out = ExtraGroup {
                 agent: a.name().to_string(),
@@ -999,12 +1008,18 @@ pub fn extra_measurements(opts: &EvalOptions, extra: usize) -> ExtraReport {
                 mean: Vec::new(),
                 median: Vec::new(),
                 p90: Vec::new(),
+                still_recognised: Vec::new(),
+                mean_still_recognised: Vec::new(),
             };
             for j in 0..=extra {
-                let mut e: Vec<f64> = mine
-                    .iter()
-                    .filter_map(|r| r.2.get(j).map(|&v| v as f64))
-                    .collect();
+                let at_j: Vec<(f32, bool)> =
+                    mine.iter().filter_map(|r| r.2.get(j).copied()).collect();
+                let kept: Vec<f64> = at_j.iter().filter(|x| x.1).map(|x| x.0 as f64).collect();
+                out.still_recognised
+                    .push(kept.len() as f64 / at_j.len().max(1) as f64);
+                out.mean_still_recognised
+                    .push(MeanCi::of(&kept).map(|m| m.mean));
+                let mut e: Vec<f64> = at_j.iter().map(|x| x.0 as f64).collect();
                 e.sort_by(f64::total_cmp);
                 out.episodes.push(e.len() as u32);
                 out.mean.push(MeanCi::of(&e).map(|m| m.mean));
@@ -1057,6 +1072,24 @@ pub fn extra_markdown(r: &ExtraReport, command: &str) -> String {
                     opt(g.median[j], 4),
                     opt(g.p90[j], 4),
                     g.episodes[j]
+                );
+            }
+            let _ = writeln!(s, "{line}");
+        }
+        let _ = writeln!(s);
+        let _ = writeln!(
+            s,
+            "Still recognised (the belief argmax is still a coarse success) / mean pose error over those (m):\n"
+        );
+        let _ = writeln!(s, "{head}\n{rule}");
+        for j in 0..=r.extra {
+            let mut line = format!("| +{j} |");
+            for g in &groups {
+                let _ = write!(
+                    line,
+                    " {:.3} / {} |",
+                    g.still_recognised.get(j).copied().unwrap_or(0.0),
+                    opt(g.mean_still_recognised.get(j).copied().flatten(), 4)
                 );
             }
             let _ = writeln!(s, "{line}");
