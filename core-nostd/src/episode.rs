@@ -51,6 +51,15 @@ pub struct EpisodeConfig {
     pub max_actions: u16,
     /// Per-action costs.
     pub costs: ActionCosts,
+    /// The pipeline's observability stop test
+    /// ([`crate::pipeline::PipelineParams::min_observability`]); 0 = off (the default, and
+    /// the only value the instrument runs so far). Left out of JSON when 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub min_observability: f32,
+}
+
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }
 
 impl Default for EpisodeConfig {
@@ -59,6 +68,7 @@ impl Default for EpisodeConfig {
             steps_per_turn: DEFAULT_STEPS_PER_TURN,
             max_actions: EVAL_MAX_ACTIONS,
             costs: ActionCosts::default(),
+            min_observability: 0.0,
         }
     }
 }

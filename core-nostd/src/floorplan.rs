@@ -102,6 +102,14 @@ pub struct FloorPlan {
 }
 
 impl FloorPlan {
+    /// A plan with no vertices, for `static` storage before a real plan is copied in (it
+    /// is not valid: [`FloorPlan::validate`] refuses it and ray casts meet nothing).
+    pub const fn empty() -> Self {
+        FloorPlan {
+            vertices: HVec::new(),
+        }
+    }
+
     /// Validates `vertices` (counter-clockwise, simple, finite, sane) into a plan.
     pub fn new(vertices: &[Vec2]) -> Result<Self, PlanError> {
         let mut raw: HVec<[f32; 2], MAX_VERTICES> = HVec::new();

@@ -25,7 +25,7 @@ use crate::floorplan::FloorPlan;
 use crate::geometry::Pose2;
 use crate::localization::{Confidence, GhtLocalizer, LocError, LocalizerConfig};
 use crate::registration::{
-    self, AnnealParams, Measurement, Observations, Registration, RegistrationError,
+    self, AnnealParams, Measurement, Observability, Observations, Registration, RegistrationError,
 };
 use crate::symmetry::{symmetry_order, SymmetryTolerance};
 use serde::{Deserialize, Serialize};
@@ -82,6 +82,11 @@ pub struct PipelineParams {
     pub termination: Termination,
     /// Seed of the registration's perturbations.
     pub registration_seed: u64,
+    /// Stop only when the readings determine the pose: the smallest eigenvalue of their
+    /// normalised information matrix at the belief argmax
+    /// ([`registration::observability`]) is at least this. 0 turns the test off (the
+    /// default, and what the instrument runs: the protocol does not carry it yet).
+    pub min_observability: f32,
 }
 
 /// Why [`Pipeline::start`] refused.
@@ -117,6 +122,8 @@ pub struct PipelineResult {
     pub recognised: Option<bool>,
     /// Cyclic symmetry order of the plan.
     pub symmetry_order: u8,
+    /// How well the readings determine the pose at the coarse estimate.
+    pub observability: Option<Observability>,
 }
 
 impl PipelineResult {
@@ -129,6 +136,8 @@ impl PipelineResult {
 /// Localizer + measurement log + termination rule of one episode.
 pub struct Pipeline {
     localizer: GhtLocalizer,
+    /// The episode's plan (the observability test ray-casts into it).
+    plan: FloorPlan,
     observations: Observations,
     params: PipelineParams,
     order: u8,
@@ -147,6 +156,7 @@ impl Pipeline {
     pub const fn new_empty() -> Self {
         Pipeline {
             localizer: GhtLocalizer::new_empty(),
+            plan: FloorPlan::empty(),
             observations: Observations::new(),
             params: PipelineParams {
                 rot_bins: 1,
@@ -154,6 +164,7 @@ impl Pipeline {
                 ground_truth: None,
                 termination: Termination::ActionLimit,
                 registration_seed: 0,
+                min_observability: 0.0,
             },
             order: 1,
             voted: false,
@@ -192,6 +203,7 @@ impl Pipeline {
             .reset(plan, &Self::localizer_config(params.rot_bins, heading))
             .map_err(PipelineError::Localizer)?;
         self.order = symmetry_order(plan, &SymmetryTolerance::default());
+        self.plan = plan.clone();
         self.observations.clear();
         self.params = *params;
         self.voted = false;
@@ -216,6 +228,19 @@ impl Pipeline {
         if !self.voted || self.observations.len() < self.min_measurements() {
             return None;
         }
+        let stop = self.belief_says_stop()?;
+        if self.params.min_observability > 0.0
+            && self
+                .observability()
+                .is_none_or(|o| o.min_eigenvalue < self.params.min_observability)
+        {
+            return None;
+        }
+        Some(stop)
+    }
+
+    /// The termination rule on the belief alone.
+    fn belief_says_stop(&self) -> Option<Stop> {
         match self.params.termination {
             Termination::Oracle => self
                 .params
@@ -270,6 +295,22 @@ impl Pipeline {
         }
     }
 
+    /// How well the readings so far determine the pose at the belief argmax
+    /// ([`registration::observability`]); `None` before any vote.
+    pub fn observability(&self) -> Option<Observability> {
+        let coarse = if self.voted {
+            self.localizer.estimate()
+        } else {
+            None
+        }?;
+        Some(registration::observability(
+            &self.plan,
+            &self.observations,
+            &coarse,
+            self.params.rot_bins <= 1,
+        ))
+    }
+
     /// Ends the episode: the coarse estimate and its refinement.
     pub fn finish(&self, plan: &FloorPlan) -> PipelineResult {
         let coarse = if self.voted {
@@ -301,6 +342,7 @@ impl Pipeline {
             registration_error,
             recognised,
             symmetry_order: self.order,
+            observability: self.observability(),
         }
     }
 
@@ -371,6 +413,7 @@ pub(crate) mod tests {
             ground_truth: None,
             termination: Termination::ActionLimit,
             registration_seed: 1,
+            min_observability: 0.0,
         };
         assert_eq!(
             p.start(&l_room(), &base),
@@ -401,6 +444,7 @@ pub(crate) mod tests {
                 ground_truth: Some(truth),
                 termination: Termination::Oracle,
                 registration_seed: 3,
+                min_observability: 0.0,
             },
         )
         .unwrap();
@@ -425,5 +469,13 @@ pub(crate) mod tests {
             (best.translation() - truth.translation()).norm() < 0.05,
             "{best:?} vs {truth:?}"
         );
+        let o = r.observability.expect("reported with a belief");
+        assert!(o.min_eigenvalue > 0.0 && o.constraints as usize == p.observations().len());
+        // The observability threshold holds the stop back: the same readings stop the
+        // episode under a threshold they meet and not under one above what they reach.
+        p.params.min_observability = 0.5 * o.min_eigenvalue;
+        assert_eq!(p.should_stop(), Some(Stop::CoarseSuccess));
+        p.params.min_observability = 2.0 * o.min_eigenvalue;
+        assert_eq!(p.should_stop(), None);
     }
 }

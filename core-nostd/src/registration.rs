@@ -220,6 +220,107 @@ impl Observations {
     }
 }
 
+/// How well a set of readings determines the pose (issue 12's observability test): the
+/// smallest eigenvalue of the normalised information matrix of the point-to-wall
+/// constraints the readings would give at a pose.
+///
+/// At `pose`, reading `i` (bearing `βᵢ`) casts a ray into the model; the wall it hits, with
+/// outward normal `nᵢ`, constrains the pose along `nᵢ` only. A small pose change
+/// `(δx, δy, δθ)` moves that reading's residual by `nᵢ·(δx, δy) + nᵢ·⊥(R(h)sᵢ)·δθ`. With
+/// the rotation expressed as the displacement it causes at the readings' RMS range `L`
+/// (`δφ = L·δθ`), the rows `Jᵢ = (nᵢ, nᵢ·⊥(R(h)sᵢ)/L)` are unitless and
+/// `A = (1/N) Σ JᵢᵀJᵢ` has eigenvalues in `[0, 1]`. Its smallest eigenvalue is the
+/// fraction of the readings' information along the worst-determined direction:
+/// 0 for a fan onto one wall (nothing fixes the position along the wall), ½ for readings
+/// split evenly between two perpendicular walls with the heading known. The heading is a
+/// column of its own only when it is unknown (`fixed_heading == false`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Observability {
+    /// Smallest eigenvalue of the normalised information matrix (0 = undetermined).
+    pub min_eigenvalue: f32,
+    /// Readings whose ray hits a wall at the pose (the others add nothing).
+    pub constraints: u16,
+}
+
+/// [`Observability`] of `obs` at `pose` (ranges are not used: only which wall each
+/// bearing's ray meets, and how).
+pub fn observability(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    fixed_heading: bool,
+) -> Observability {
+    let a = pose.translation();
+    let mut rows: HVec<[f32; 3], MAX_OBSERVATIONS> = HVec::new();
+    let mut sum_r2 = 0.0f32;
+    for p in obs.pts.iter() {
+        let d = rotate(p.d, pose.theta);
+        if let Some(hit) = plan.ray_cast(a, d) {
+            let n = plan.outward_normal(hit.wall);
+            let rs = d * hit.range; // R(h)·s for the predicted point
+            let rot = n.x * -rs.y + n.y * rs.x;
+            sum_r2 += hit.range * hit.range;
+            let _ = rows.push([n.x, n.y, rot]);
+        }
+    }
+    let m = rows.len();
+    if m == 0 {
+        return Observability {
+            min_eigenvalue: 0.0,
+            constraints: 0,
+        };
+    }
+    let l = sqrt(sum_r2 / m as f32).max(1e-6);
+    let mut info = [[0.0f32; 3]; 3];
+    for r in rows.iter() {
+        let j = [r[0], r[1], r[2] / l];
+        for (u, ju) in j.iter().enumerate() {
+            for (v, jv) in j.iter().enumerate() {
+                info[u][v] += ju * jv / m as f32;
+            }
+        }
+    }
+    let min_eigenvalue = if fixed_heading {
+        min_eigen_2x2(info[0][0], info[0][1], info[1][1])
+    } else {
+        min_eigen_3x3(&info)
+    };
+    Observability {
+        min_eigenvalue: min_eigenvalue.max(0.0),
+        constraints: m as u16,
+    }
+}
+
+/// Smallest eigenvalue of the symmetric `[[a, b], [b, c]]`.
+fn min_eigen_2x2(a: f32, b: f32, c: f32) -> f32 {
+    let mean = 0.5 * (a + c);
+    let half = sqrt(0.25 * (a - c) * (a - c) + b * b);
+    mean - half
+}
+
+/// Smallest eigenvalue of a symmetric 3×3 matrix (trigonometric solution of the
+/// characteristic cubic, Smith 1961).
+fn min_eigen_3x3(m: &[[f32; 3]; 3]) -> f32 {
+    let p1 = m[0][1] * m[0][1] + m[0][2] * m[0][2] + m[1][2] * m[1][2];
+    let q = (m[0][0] + m[1][1] + m[2][2]) / 3.0;
+    if p1 <= 1e-12 {
+        return m[0][0].min(m[1][1]).min(m[2][2]);
+    }
+    let p2 = (m[0][0] - q) * (m[0][0] - q)
+        + (m[1][1] - q) * (m[1][1] - q)
+        + (m[2][2] - q) * (m[2][2] - q)
+        + 2.0 * p1;
+    let p = sqrt(p2 / 6.0);
+    let b = |i: usize, j: usize| (m[i][j] - if i == j { q } else { 0.0 }) / p;
+    let det = b(0, 0) * (b(1, 1) * b(2, 2) - b(1, 2) * b(2, 1))
+        - b(0, 1) * (b(1, 0) * b(2, 2) - b(1, 2) * b(2, 0))
+        + b(0, 2) * (b(1, 0) * b(2, 1) - b(1, 1) * b(2, 0));
+    let r = (det / 2.0).clamp(-1.0, 1.0);
+    let phi = crate::math::acos(r) / 3.0;
+    // Eigenvalues q + 2p·cos(φ + 2πk/3); k = 1 gives the smallest.
+    q + 2.0 * p * cos(phi + TAU / 3.0)
+}
+
 /// Parameters of Sparse ICP (Algorithm 4).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IcpParams {
@@ -914,6 +1015,50 @@ mod tests {
     fn plan(pts: &[(f32, f32)]) -> FloorPlan {
         let v: HVec<Vec2, MAX_VERTICES> = pts.iter().map(|&(x, y)| v2(x, y)).collect();
         FloorPlan::new(&v).unwrap().centered()
+    }
+
+    #[test]
+    fn observability_flags_a_one_wall_fan_and_passes_a_spread_set() {
+        // A 8 m x 6 m room, instrument at the centre facing +x (AgentPose heading 0).
+        let room = plan(&[(0.0, 0.0), (8.0, 0.0), (8.0, 6.0), (0.0, 6.0)]);
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        let obs_of = |bearings: &[f32]| {
+            let v: HVec<Measurement, 16> =
+                bearings.iter().map(|&b| Measurement::new(b, 4.0)).collect();
+            Observations::from_slice(&v).unwrap()
+        };
+        // Five readings fanned ±20° onto the east wall: nothing fixes y (nor, with the
+        // heading unknown, the rotation against y).
+        let fan = obs_of(&[-0.35, -0.17, 0.0, 0.17, 0.35]);
+        for fixed in [true, false] {
+            let o = observability(&room, &fan, &pose, fixed);
+            assert_eq!(o.constraints, 5);
+            assert!(o.min_eigenvalue < 1e-4, "fan, fixed heading {fixed}: {o:?}");
+        }
+        // One reading per wall: heading known, n = (±1, 0), (0, ±1) → A = ½·I.
+        let spread = obs_of(&[0.0, 0.5 * PI, PI, 1.5 * PI]);
+        let o = observability(&room, &spread, &pose, true);
+        assert!((o.min_eigenvalue - 0.5).abs() < 1e-5, "{o:?}");
+        // Heading unknown: head-on readings carry no rotation information; oblique ones do.
+        let head_on = observability(&room, &spread, &pose, false);
+        assert!(head_on.min_eigenvalue < 1e-4, "{head_on:?}");
+        let oblique = obs_of(&[0.3, 0.5 * PI + 0.3, PI + 0.3, 1.5 * PI + 0.3, 2.0, 4.0]);
+        let o = observability(&room, &oblique, &pose, false);
+        assert!(o.min_eigenvalue > 0.02, "{o:?}");
+        // The eigenvalue helpers against brute force on a random symmetric matrix.
+        let m = [[0.7f32, 0.2, -0.1], [0.2, 0.4, 0.05], [-0.1, 0.05, 0.3]];
+        let det = |l: f32| {
+            let a = |i: usize, j: usize| m[i][j] - if i == j { l } else { 0.0 };
+            a(0, 0) * (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1))
+                - a(0, 1) * (a(1, 0) * a(2, 2) - a(1, 2) * a(2, 0))
+                + a(0, 2) * (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0))
+        };
+        let l = min_eigen_3x3(&m);
+        assert!(det(l).abs() < 1e-5, "det(A − λI) = {}", det(l));
+        // No eigenvalue below it: the characteristic polynomial keeps its sign under λ.
+        assert!((0..100).all(|k| det(l - 0.001 - k as f32 * 0.01) > 0.0));
+        let l2 = min_eigen_2x2(0.7, 0.2, 0.4);
+        assert!(((0.7 - l2) * (0.4 - l2) - 0.04).abs() < 1e-6 && l2 < 0.4);
     }
 
     /// Asymmetric test rooms (model frame, centred).

@@ -66,6 +66,7 @@ impl EpisodeRunner {
                         rotate: 0.005,
                         measure: 0.05,
                     },
+                    min_observability: 0.0,
                 },
                 bearing_index: 0,
                 actions: 0,
@@ -233,6 +234,7 @@ mod tests {
             ground_truth: None,
             termination: Termination::ActionLimit,
             registration_seed: 1,
+            min_observability: 0.0,
         };
         r.start(&plan, &params, EpisodeConfig::default(), 0)
             .unwrap();

@@ -362,6 +362,8 @@ impl Controller {
             ground_truth: p.ground_truth,
             termination: p.termination,
             registration_seed: registration_seed(p.seed),
+            // Not on the wire yet (protocol v3): the instrument stops as before.
+            min_observability: 0.0,
         };
         self.running = None;
         // An episode takes the localizer's memory back from a staged upload.

@@ -44,6 +44,7 @@ fuzz_target!(|data: &[u8]| {
         ground_truth: None,
         termination: Termination::ActionLimit,
         registration_seed: 1,
+        min_observability: 0.0,
     };
     if runner
         .start(&plan, &params, EpisodeConfig::default(), 0b101)

@@ -229,6 +229,7 @@ pub fn pipeline_params(spec: &EpisodeSpec, truth: &Pose2) -> PipelineParams {
         ground_truth: Some(*truth),
         termination: spec.termination,
         registration_seed: spec.registration_seed(),
+        min_observability: spec.config.min_observability,
     }
 }
 

@@ -212,6 +212,11 @@ struct EvalArgs {
     /// extra.svg; episodes run to --max-actions, so give room, e.g. --max-actions 300).
     #[arg(long)]
     extra_measurements: Option<usize>,
+    /// Stop only once the readings determine the pose: the smallest eigenvalue of their
+    /// normalised information matrix at the belief argmax must reach this (0 = off, as on
+    /// the instrument; docs/EVALUATION.md, "Observability").
+    #[arg(long, default_value_t = 0.0)]
+    min_observability: f32,
 }
 
 #[derive(Clone)]
@@ -317,6 +322,11 @@ struct EpisodeArgs {
     /// Plan seed (u32).
     #[arg(long)]
     seed: u32,
+    /// Stop only once the readings determine the pose: the smallest eigenvalue of their
+    /// normalised information matrix at the belief argmax must reach this (0 = off, as on
+    /// the instrument; docs/EVALUATION.md, "Observability").
+    #[arg(long, default_value_t = 0.0)]
+    min_observability: f32,
     /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
     /// learnt.
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
@@ -559,6 +569,7 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         config: EpisodeConfig {
             steps_per_turn: a.steps_per_turn,
             max_actions: a.max_actions,
+            min_observability: a.min_observability,
             ..Default::default()
         },
         sensor: a.sensor.model()?,
@@ -744,6 +755,7 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
         episode_seed: a.episode_seed,
         config: EpisodeConfig {
             max_actions: a.max_actions,
+            min_observability: a.min_observability,
             ..Default::default()
         },
         sensor: a.sensor.model()?,
