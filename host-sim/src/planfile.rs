@@ -990,6 +990,49 @@ mod tests {
     }
 
     #[test]
+    fn dxf_polyline_and_closing_vertex() {
+        let d = dir("poly");
+        let opts = LoadOptions::default();
+        // An old-style POLYLINE (VERTEX entities, SEQEND), closed by its flag.
+        let mut t = String::from(
+            "0\nSECTION\n2\nENTITIES\n0\nPOLYLINE\n5\n50\n8\nROOMS\n66\n1\n10\n0\n20\n0\n30\n0\n70\n1\n",
+        );
+        for p in L_ROOM {
+            t += &format!("0\nVERTEX\n8\nROOMS\n10\n{}\n20\n{}\n30\n0\n", p[0], p[1]);
+        }
+        t += "0\nSEQEND\n8\nROOMS\n0\nENDSEC\n0\nEOF\n";
+        let poly = d.join("poly.dxf");
+        std::fs::write(&poly, t).unwrap();
+        assert_same(&load_plan(&poly, &opts).unwrap().plan.plan);
+        // An LWPOLYLINE without the closed flag whose last vertex repeats the first.
+        let mut ring = L_ROOM.to_vec();
+        ring.push(ring[0]);
+        let lw = d.join("ring.dxf");
+        std::fs::write(&lw, dxf_text(&[("0", &ring, false)], Some(6))).unwrap();
+        assert_same(&load_plan(&lw, &opts).unwrap().plan.plan);
+        // Two rooms on one layer: --plan needs --room, load_rooms names them by index.
+        let rect: &[[f64; 2]] = &[[10.0, 0.0], [14.0, 0.0], [14.0, 3.0], [10.0, 3.0]];
+        let two = d.join("two-rooms.dxf");
+        std::fs::write(
+            &two,
+            dxf_text(&[("R", &L_ROOM, true), ("R", rect, true)], None),
+        )
+        .unwrap();
+        let rooms = load_rooms(&two, &opts).unwrap();
+        let names: Vec<_> = rooms.iter().map(|r| r.plan.name.as_str()).collect();
+        assert_eq!(names, ["two-rooms.dxf#0", "two-rooms.dxf#1"]);
+        assert!(load_plan(&two, &opts)
+            .unwrap_err()
+            .reason
+            .contains("holds 2 rooms"));
+        let first = LoadOptions {
+            room: Some("0".into()),
+            ..Default::default()
+        };
+        assert_same(&load_plan(&two, &first).unwrap().plan.plan);
+    }
+
+    #[test]
     fn file_seeds_are_stable() {
         let p = NamedPlan {
             name: "office.json".into(),
