@@ -317,22 +317,34 @@ fn eval_plans_from_a_directory_skips_and_lists_the_bad_file() {
     std::fs::write(plans.join("bad.json"), r#"{"vertices": [[0, 0], [1, 0]]}"#).unwrap();
     std::fs::write(plans.join("README.txt"), "not a plan").unwrap();
     let out_dir = dir.join("out");
-    let out = activesense(&[
-        "eval",
-        "--plans-from",
-        s(&plans),
-        "--agents",
-        "heuristic-1,eem",
-        "--rot-bins",
-        "1",
-        "--curve-plans",
-        "1",
-        "--no-progress",
-        "--out",
-        s(&out_dir),
-    ]);
+    // Every kind of agent plays the user's rooms: a baseline, the float and int8 learnt
+    // policies, and the greedy benchmarks (which rebuild the room from the spec).
+    let eval = |out_dir: &Path| {
+        activesense(&[
+            "eval",
+            "--plans-from",
+            s(&plans),
+            "--agents",
+            "heuristic-1,learnt,learnt-int8,oigm,eem",
+            "--rot-bins",
+            "1",
+            "--curve-plans",
+            "1",
+            "--no-progress",
+            "--out",
+            s(out_dir),
+        ])
+    };
+    let out = eval(&out_dir);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{err}");
+    // Deterministic: a second run writes the same results.json.
+    let again = dir.join("again");
+    assert!(eval(&again).status.success());
+    assert_eq!(
+        std::fs::read(out_dir.join("results.json")).unwrap(),
+        std::fs::read(again.join("results.json")).unwrap()
+    );
     assert!(
         err.contains(&format!("refused: {}", plans.join("bad.json").display())),
         "{err}"
@@ -345,8 +357,13 @@ fn eval_plans_from_a_directory_skips_and_lists_the_bad_file() {
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("results.json")).unwrap())
             .unwrap();
-    for g in r["results"].as_array().unwrap() {
+    let groups = r["results"].as_array().unwrap();
+    assert_eq!(groups.len(), 5);
+    for g in groups {
         assert_eq!(g["plans"], 4);
+        // Every episode ran in the user's room (a generated plan would not carry its name)
+        // and produced an estimate.
+        assert_eq!(g["unregistered"], 0, "{}", g["agent"]);
         let names: Vec<&str> = g["episodes"]
             .as_array()
             .unwrap()
