@@ -277,6 +277,23 @@ fn malformed_files_give_the_documented_errors() {
     );
     refused(&w("room.txt", "{}"), &[], &["unknown plan format"]);
     refused(&dir.join("missing.json"), &[], &["cannot read"]);
+    // `serial run` reads its plan with the same loader, before it opens the port.
+    let out = activesense(&[
+        "serial",
+        "run",
+        "--port",
+        "/nonexistent/tty",
+        "--plan",
+        s(&dir.join("bow.json")),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.starts_with(&format!(
+            "error: {}: the outline crosses itself",
+            dir.join("bow.json").display()
+        )),
+        "{err}"
+    );
     // The layer option picks one of the candidates, and the units option scales.
     let out = activesense(&[
         "episode",
