@@ -222,8 +222,8 @@ fn format_of(path: &Path) -> Option<Format> {
     }
 }
 
-/// One outline as read from a file, before validation: name, vertices in file units,
-/// where each vertex came from ("vertex 3" or "vertex 3 of LWPOLYLINE 2F"), warnings.
+/// One outline as read from a file, before validation: its name inside a multi-room file,
+/// vertices in file units, warnings.
 struct RawRoom {
     name: Option<String>,
     vertices: Vec<[f64; 2]>,
@@ -239,7 +239,7 @@ pub fn load_rooms(path: &Path, opts: &LoadOptions) -> Result<Vec<LoadedPlan>, Pl
             "unknown plan format (expected .json, .geojson or .dxf)",
         )
     })?;
-    let (rooms, file_units, mut notes) = match format {
+    let (rooms, file_units) = match format {
         Format::Json | Format::GeoJson => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| err(path, None, format!("cannot read: {e}")))?;
@@ -251,18 +251,16 @@ pub fn load_rooms(path: &Path, opts: &LoadOptions) -> Result<Vec<LoadedPlan>, Pl
             } else {
                 vec![our_json_room(path, &value)?]
             };
-            (rooms, None, Vec::new())
+            (rooms, None)
         }
-        Format::Dxf => {
-            let (rooms, units) = dxf_rooms(path, opts)?;
-            (rooms, units, Vec::new())
-        }
+        Format::Dxf => dxf_rooms(path, opts)?,
     };
     let units = opts.units.map(|u| (u.scale(), u.name()));
-    let (scale, unit_name) = units.or(file_units).unwrap_or((1.0, "m"));
-    if unit_name != "m" {
-        notes.push(format!("coordinates in {unit_name}"));
+    let mut notes = Vec::new();
+    if let (None, Some((_, name))) = (units, file_units) {
+        notes.push(format!("coordinates in {name} ($INSUNITS)"));
     }
+    let (scale, unit_name) = units.or(file_units).unwrap_or((1.0, "m"));
     let stem = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -682,7 +680,8 @@ fn dxf_rooms(path: &Path, opts: &LoadOptions) -> Result<DxfRooms, PlanFileError>
             ))
         }
     };
-    // (layer, entity label, vertices, closed, bulge at vertex)
+    /// A polyline entity: layer, label for messages, vertices, closed, first vertex with a
+    /// bulge, mesh.
     struct Poly {
         layer: String,
         label: String,
