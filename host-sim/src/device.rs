@@ -6,7 +6,6 @@
 
 use crate::episode::EpisodeSpec;
 use crate::link::{LinkError, LinkResult};
-use crate::plans;
 use crate::world::SimWorld;
 use activesense_core::agents::Action;
 use activesense_core::episode::Observation;
@@ -79,7 +78,7 @@ impl Instrument for SimInstrument {
 /// the instrument. Seeds come from `spec` exactly as in [`crate::episode::run_episode`]
 /// (the initial scan is taken first, as there).
 pub fn sim_episode(spec: &EpisodeSpec) -> (FloorPlan, EpisodeParams, SimInstrument) {
-    let plan = plans::generate(spec.plan_seed);
+    let plan = spec.plan();
     let mut world = SimWorld::new(plan.clone(), spec.sensor, spec.config, spec.world_seed());
     let initial_scan = world.scan();
     let truth = world.truth();

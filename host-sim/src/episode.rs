@@ -43,6 +43,11 @@ pub struct EpisodeSpec {
     pub sensor: SensorModel,
     /// When the episode stops.
     pub termination: Termination,
+    /// The user's room (`--plan`, `--plans-from`, `docs/PLANS.md`); `None`: the generated
+    /// plan `plan_seed`. With a user room, `plan_seed` only feeds the seed derivation
+    /// ([`crate::planfile::NamedPlan::seed`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub user_plan: Option<crate::planfile::NamedPlan>,
 }
 
 impl EpisodeSpec {
@@ -56,6 +61,23 @@ impl EpisodeSpec {
             config: EpisodeConfig::default(),
             sensor: SensorModel::default(),
             termination: Termination::Oracle,
+            user_plan: None,
+        }
+    }
+
+    /// The room of the episode: the user's plan, or the generated plan `plan_seed`.
+    pub fn plan(&self) -> FloorPlan {
+        match &self.user_plan {
+            Some(p) => p.plan.clone(),
+            None => plans::generate(self.plan_seed),
+        }
+    }
+
+    /// `plan 1000003` or the user's room name.
+    pub fn plan_label(&self) -> String {
+        match &self.user_plan {
+            Some(p) => p.name.clone(),
+            None => format!("plan {}", self.plan_seed),
         }
     }
 
@@ -243,12 +265,13 @@ pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
 /// A simulated room for `spec` and an [`EpisodeRunner`] started in it (the truth is
 /// `world.truth()`) and the initial scan. Shared by [`run_episode_with`] and the trainer.
 pub fn start_episode(spec: &EpisodeSpec, runner: &mut EpisodeRunner) -> (FloorPlan, SimWorld, u32) {
-    let plan = plans::generate(spec.plan_seed);
+    let plan = spec.plan();
     let mut world = SimWorld::new(plan.clone(), spec.sensor, spec.config, spec.world_seed());
     let truth = world.truth();
     let initial_scan = world.scan();
-    // Generated plans are valid, centred and within the R-table capacity (tested), and the
-    // parameters are complete by construction, so a failure here is a bug, not bad input.
+    // Generated plans are valid, centred and within the R-table capacity (tested), user plans
+    // were started once when loaded (`planfile::fits_pipeline`), and the parameters are
+    // complete by construction, so a failure here is a bug, not bad input.
     runner
         .start(
             &plan,

@@ -67,6 +67,13 @@ pub struct EvalOptions {
     /// many plans (the entropy and recognition curves use every plan).
     #[serde(default)]
     pub curve_plans: u32,
+    /// The user's rooms (`--plans-from`, `docs/PLANS.md`): when not empty they replace the
+    /// generated plans, and `plans` is their number.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub user_plans: Vec<crate::planfile::NamedPlan>,
+    /// Plan files `--plans-from` refused, with why (listed in `results.md`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub refused_plans: Vec<String>,
 }
 
 impl EvalOptions {
@@ -78,14 +85,19 @@ impl EvalOptions {
         i: u32,
         termination: Termination,
     ) -> EpisodeSpec {
+        let user_plan = self.user_plans.get(i as usize).cloned();
         EpisodeSpec {
-            plan_seed: self.first_seed.wrapping_add(i),
+            plan_seed: match &user_plan {
+                Some(p) => p.seed(),
+                None => self.first_seed.wrapping_add(i),
+            },
             episode_seed: self.episode_seed,
             agent,
             rot_bins,
             config: self.config,
             sensor: self.sensor,
             termination,
+            user_plan,
         }
     }
 }
@@ -95,6 +107,9 @@ impl EvalOptions {
 pub struct EpisodeRow {
     /// Plan seed.
     pub plan_seed: u32,
+    /// The user's room name (`--plans-from` evaluations only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<String>,
     /// Coarse success at the end.
     pub recognised: bool,
     /// Measurement actions.
@@ -118,6 +133,7 @@ impl EpisodeRow {
     fn of(t: &Trajectory) -> Self {
         EpisodeRow {
             plan_seed: t.spec.plan_seed,
+            plan: t.spec.user_plan.as_ref().map(|p| p.name.clone()),
             recognised: t.outcome.recognised,
             measurements: t.summary.measurements,
             rotations: t.summary.rotations,
@@ -607,6 +623,15 @@ fn opt(x: Option<f64>, digits: usize) -> String {
         .unwrap_or_else(|| "–".into())
 }
 
+/// "N plans from seed S", or the user's rooms by name.
+fn plan_source(o: &EvalOptions) -> String {
+    if o.user_plans.is_empty() {
+        return format!("{} plans from seed {}", o.plans, o.first_seed);
+    }
+    let names: Vec<&str> = o.user_plans.iter().map(|p| p.name.as_str()).collect();
+    format!("{} user plans ({})", names.len(), names.join(", "))
+}
+
 /// Renders `results.md`.
 pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
     let o = &report.options;
@@ -615,11 +640,10 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
     let _ = writeln!(s, "Produced by `{command}`.\n");
     let _ = writeln!(
         s,
-        "{} plans from seed {}, episode seed {}, action limit {}, rotation step 360°/{}, termination `{:?}`; \
+        "{}, episode seed {}, action limit {}, rotation step 360°/{}, termination `{:?}`; \
          EDM σ = {} m, outliers {:.0} %, max range {} m, max incidence {:.0}°. \
          Wall time {:.1} s on {} threads.\n",
-        o.plans,
-        o.first_seed,
+        plan_source(o),
         o.episode_seed,
         o.config.max_actions,
         o.config.steps_per_turn,
@@ -631,6 +655,13 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         timing.total_s,
         timing.threads
     );
+    if !o.refused_plans.is_empty() {
+        let _ = writeln!(s, "Plan files refused (not evaluated):\n");
+        for r in &o.refused_plans {
+            let _ = writeln!(s, "- {r}");
+        }
+        let _ = writeln!(s);
+    }
     for &k in &o.rot_bins {
         let _ = writeln!(
             s,
@@ -1046,11 +1077,12 @@ pub fn extra_markdown(r: &ExtraReport, command: &str) -> String {
     let _ = writeln!(s, "Produced by `{command}`.\n");
     let _ = writeln!(
         s,
-        "{} plans from seed {}, action limit {}. The minimal set is the ranges an episode had when the oracle rule \
+        "{}, action limit {}. The minimal set is the ranges an episode had when the oracle rule \
          would have stopped it; the agent then carries on and the pipeline registers after every further range. \
          Cells: mean / median / p90 pose error (m) over the episodes that got that far (their number in the last \
          column group).\n",
-        r.options.plans, r.options.first_seed, r.options.config.max_actions
+        plan_source(&r.options),
+        r.options.config.max_actions
     );
     for &k in &r.options.rot_bins {
         let _ = writeln!(s, "## K = {k}\n");
@@ -1161,6 +1193,8 @@ mod tests {
             policies: Policies::default(),
             progress: false,
             curve_plans: 3,
+            user_plans: Vec::new(),
+            refused_plans: Vec::new(),
         }
     }
 

@@ -9,7 +9,7 @@
 //! inspection tool: trajectory pages and the guided-back-propagation analysis ([`inspect`]).
 //! [`link`], [`device`] and [`remote`] talk the instrument serial protocol
 //! (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a
-//! thread. The `activesense` binary (`src/main.rs`) is the command-line front end.
+//! thread. [`planfile`] reads the user's own floor plans (JSON, GeoJSON, DXF). The `activesense` binary (`src/main.rs`) is the command-line front end.
 
 pub mod bench_localization;
 pub mod bench_registration;
@@ -21,6 +21,7 @@ pub mod greedy;
 pub mod inspect;
 pub mod learn;
 pub mod link;
+pub mod planfile;
 pub mod plans;
 pub mod plot;
 pub mod remote;

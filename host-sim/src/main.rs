@@ -5,6 +5,7 @@ use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_sim::episode::{parse_agent, parse_termination, scan_string, EpisodeSpec};
 use activesense_sim::learn::agent::{run_agent_episode, Policies};
+use activesense_sim::planfile::{self, PlanReadArgs};
 use activesense_sim::plans::{self, Family};
 use activesense_sim::sensor::SensorModel;
 use activesense_sim::svg::{self, Scene};
@@ -176,9 +177,19 @@ struct EvalArgs {
     /// Comma-separated rotation settings: 1 (heading known) and/or 10.
     #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
     rot_bins: Vec<u8>,
-    /// Number of test plans.
+    /// Number of test plans (generated; see --plan / --plans-from for your own).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
     plans: u32,
+    /// Evaluate in the room of this plan file instead of the test plans (JSON, GeoJSON or
+    /// DXF; docs/PLANS.md).
+    #[arg(long)]
+    plan: Option<PathBuf>,
+    /// Evaluate in every room of these plan files and directories (.json, .geojson, .dxf;
+    /// refused files are listed and skipped).
+    #[arg(long, num_args = 1..)]
+    plans_from: Vec<PathBuf>,
+    #[command(flatten)]
+    read: PlanReadArgs,
     /// First plan seed (the test set is 1000000..1001000).
     #[arg(long, default_value_t = plans::TEST_SEEDS.start)]
     first_seed: u32,
@@ -320,8 +331,14 @@ impl SensorArgs {
 #[derive(Args)]
 struct EpisodeArgs {
     /// Plan seed (u32).
+    #[arg(long, required_unless_present = "plan", conflicts_with = "plan")]
+    seed: Option<u32>,
+    /// Play the episode in the room of this plan file instead of a generated plan (JSON,
+    /// GeoJSON or DXF; docs/PLANS.md).
     #[arg(long)]
-    seed: u32,
+    plan: Option<PathBuf>,
+    #[command(flatten)]
+    read: PlanReadArgs,
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax must reach this (0 = off, as on
     /// the instrument; docs/EVALUATION.md, "Observability").
@@ -561,8 +578,19 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
             a.rot_bins
         );
     }
+    let user_plan = match &a.plan {
+        Some(p) => {
+            let rooms = planfile::rooms_for_command(Some(p), &[], &a.read)?;
+            rooms.and_then(|(mut r, _)| r.pop())
+        }
+        None => None,
+    };
     let spec = EpisodeSpec {
-        plan_seed: a.seed,
+        plan_seed: match &user_plan {
+            Some(p) => p.seed(),
+            None => a.seed.unwrap_or_default(),
+        },
+        user_plan,
         episode_seed: a.episode_seed,
         agent: a.agent,
         rot_bins: a.rot_bins,
@@ -595,8 +623,8 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
         println!("policy: {}", p.describe());
     }
     println!(
-        "episode: plan {} agent {} rot-bins {} max-actions {} episode-seed {}",
-        spec.plan_seed,
+        "episode: {} agent {} rot-bins {} max-actions {} episode-seed {}",
+        spec.plan_label(),
         spec.agent.name(),
         spec.rot_bins,
         spec.config.max_actions,
@@ -681,8 +709,8 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
     if let Some(path) = &a.svg {
         let scene = Scene {
             title: format!(
-                "plan {} — {} episode, {} measurements",
-                spec.plan_seed,
+                "{} — {} episode, {} measurements",
+                spec.plan_label(),
                 spec.agent.name(),
                 t.summary.measurements
             ),
@@ -747,10 +775,18 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
             .build_global()
             .context("cannot set the thread count")?;
     }
+    let rooms = planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
+    let (user_plans, refused) = rooms.unwrap_or_default();
     let opts = eval::EvalOptions {
         agents: a.agents.0.clone(),
         rot_bins,
-        plans: a.plans,
+        plans: if user_plans.is_empty() {
+            a.plans
+        } else {
+            user_plans.len() as u32
+        },
+        user_plans,
+        refused_plans: refused.iter().map(|e| e.to_string()).collect(),
         first_seed: a.first_seed,
         episode_seed: a.episode_seed,
         config: EpisodeConfig {

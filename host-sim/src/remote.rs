@@ -73,6 +73,15 @@ pub struct SimArgs {
     /// (`qemu` links; decoded by `cargo xtask qemu-log`).
     #[arg(long)]
     pub defmt_out: Option<PathBuf>,
+    /// Run in the room of this plan file (JSON, GeoJSON or DXF; `docs/PLANS.md`) instead of
+    /// generated plans: `--episodes` episodes, episode seeds episode-seed, episode-seed+1, ...
+    #[arg(long)]
+    pub plan: Option<PathBuf>,
+    /// Run `--episodes` episodes in every room of these plan files or directories.
+    #[arg(long, num_args = 1..)]
+    pub plans_from: Vec<PathBuf>,
+    #[command(flatten)]
+    pub read: crate::planfile::PlanReadArgs,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -102,10 +111,13 @@ pub struct SerialRunArgs {
     /// Baud rate.
     #[arg(long, default_value_t = link::DEFAULT_BAUD)]
     pub baud: u32,
-    /// Floor-plan JSON: {"vertices": [[x, y], ...]} (metres, any orientation; it is
-    /// re-centred on its perimeter centroid, the model frame).
+    /// Floor-plan file: our JSON {"vertices": [[x, y], ...]}, GeoJSON or DXF
+    /// (`docs/PLANS.md`; metres unless --units, any orientation; it is re-centred on its
+    /// perimeter centroid, the model frame).
     #[arg(long)]
     pub plan: PathBuf,
+    #[command(flatten)]
+    pub read: crate::planfile::PlanReadArgs,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -139,6 +151,7 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
         },
         sensor: SensorModel::default(),
         termination: a.termination,
+        user_plan: None,
     })
 }
 
@@ -176,6 +189,8 @@ pub fn same_run(a: &EpisodeRun, b: &EpisodeRun) -> bool {
 }
 
 struct Totals {
+    /// Pose errors of the episodes with an estimate (m).
+    pose_errors: Vec<f32>,
     episodes: u32,
     actions: u64,
     measurements: u64,
@@ -187,15 +202,45 @@ fn mean_cycles(s: &UpdateStats) -> u64 {
     s.total_cycles / s.updates.max(1) as u64
 }
 
-fn print_run(label: &str, run: &EpisodeRun, t: &mut Totals) {
+/// Symmetry-aware pose error of the device's answer (refined, else coarse) against the
+/// simulated truth, and which estimate it was.
+fn pose_error(
+    plan: &FloorPlan,
+    truth: &activesense_core::Pose2,
+    r: &EpisodeReport,
+) -> Option<(f32, &'static str)> {
+    use activesense_core::pose_distance::PoseDistance;
+    use activesense_core::symmetry::SymmetryTolerance;
+    let d = PoseDistance::new(plan, &SymmetryTolerance::default());
+    match (r.refined, r.coarse) {
+        (Some(p), _) => Some((d.agent_distance(&p, truth), "refined")),
+        (None, Some(p)) => Some((d.agent_distance(&p, truth), "coarse")),
+        _ => None,
+    }
+}
+
+fn print_run(
+    label: &str,
+    run: &EpisodeRun,
+    plan: &FloorPlan,
+    params: &EpisodeParams,
+    t: &mut Totals,
+) {
     let r = &run.report;
+    let err = params
+        .ground_truth
+        .as_ref()
+        .and_then(|truth| pose_error(plan, truth, r));
+    if let Some((e, _)) = err {
+        t.pose_errors.push(e);
+    }
     let pose = |p: Option<activesense_core::Pose2>| {
         p.map(|p| format!("({:.3}, {:.3}, {:.1}°)", p.x, p.y, p.theta.to_degrees()))
             .unwrap_or_else(|| "none".into())
     };
     println!(
         "{label}: {:?} after {} actions ({} measurements, {} no-return, {} rotations), cost {:.3}, \
-         coarse {}, refined {}{}, trace {:08x}, cycles/update mean {} max {} (vote mean {}, rotation mean {}), finish {}",
+         coarse {}, refined {}{}, pose error {}, trace {:08x}, cycles/update mean {} max {} (vote mean {}, rotation mean {}), finish {}",
         r.end,
         r.actions,
         r.measurements,
@@ -208,6 +253,10 @@ fn print_run(label: &str, run: &EpisodeRun, t: &mut Totals) {
             Some(true) => " (recognised)",
             Some(false) => " (not recognised)",
             None => "",
+        },
+        match err {
+            Some((e, which)) => format!("{e:.4} m ({which})"),
+            None => "none".to_string(),
         },
         r.trace_hash,
         mean_cycles(&r.cycles.updates()),
@@ -234,6 +283,16 @@ fn print_totals(t: &Totals, secs: f64) {
         t.no_returns as f64 / n,
         t.cost / n
     );
+    if !t.pose_errors.is_empty() {
+        let mut e = t.pose_errors.clone();
+        e.sort_by(f32::total_cmp);
+        println!(
+            "pose error against the simulated truth: mean {:.4} m, median {:.4} m over {} episodes with an estimate",
+            e.iter().map(|x| *x as f64).sum::<f64>() / e.len() as f64,
+            e[e.len() / 2],
+            e.len()
+        );
+    }
 }
 
 fn run_one(
@@ -276,20 +335,42 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
     );
     let start = Instant::now();
     let mut t = Totals {
+        pose_errors: Vec::new(),
         episodes: 0,
         actions: 0,
         measurements: 0,
         no_returns: 0,
         cost: 0.0,
     };
-    for i in 0..a.episode.episodes {
-        let seed = a.first_seed.wrapping_add(i);
-        let spec = spec_for(seed, &a.episode)?;
-        let (plan, params, inst) = sim_episode(&spec);
-        let reference = a.episode.verify.then(|| sim_episode(&spec));
+    let rooms = crate::planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
+    // Generated plans: one episode per plan seed. The user's rooms: `--episodes` episodes in
+    // each, episode seeds episode-seed, episode-seed + 1, ...
+    let specs: Vec<(String, EpisodeSpec)> = match &rooms {
+        None => (0..a.episode.episodes)
+            .map(|i| {
+                let seed = a.first_seed.wrapping_add(i);
+                Ok((format!("plan {seed}"), spec_for(seed, &a.episode)?))
+            })
+            .collect::<Result<_>>()?,
+        Some((rooms, _)) => {
+            let mut v = Vec::new();
+            for room in rooms {
+                for i in 0..a.episode.episodes {
+                    let mut spec = spec_for(room.seed(), &a.episode)?;
+                    spec.episode_seed = a.episode.episode_seed.wrapping_add(i as u64);
+                    spec.user_plan = Some(room.clone());
+                    v.push((format!("{} episode {i}", room.name), spec));
+                }
+            }
+            v
+        }
+    };
+    for (label, spec) in &specs {
+        let (plan, params, inst) = sim_episode(spec);
+        let reference = a.episode.verify.then(|| sim_episode(spec));
         let run = run_one(&mut link, &plan, &params, inst, reference)
-            .with_context(|| format!("episode on plan {seed}"))?;
-        print_run(&format!("plan {seed}"), &run, &mut t);
+            .with_context(|| format!("episode on {label}"))?;
+        print_run(label, &run, &plan, &params, &mut t);
     }
     let status = link.client.status().context("status")?;
     println!(
@@ -317,28 +398,12 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
     Ok(())
 }
 
-/// Reads a `{"vertices": [[x, y], ...]}` plan file into a model-frame plan.
+/// Reads a plan file (our JSON, GeoJSON or DXF, metres; [`crate::planfile`]) into a
+/// model-frame plan.
 pub fn read_plan_file(path: &std::path::Path) -> Result<FloorPlan> {
-    #[derive(serde::Deserialize)]
-    struct PlanFile {
-        vertices: Vec<[f32; 2]>,
-    }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let f: PlanFile = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{}: expected {{\"vertices\": [[x, y], ...]}}",
-            path.display()
-        )
-    })?;
-    let pts: Vec<_> = f
-        .vertices
-        .iter()
-        .map(|v| activesense_core::geometry::v2(v[0], v[1]))
-        .collect();
-    let plan = FloorPlan::new_any_orientation(&pts)
-        .map_err(|e| anyhow::anyhow!("{}: invalid floor-plan: {e}", path.display()))?;
-    Ok(plan.centered())
+    Ok(crate::planfile::load_plan(path, &Default::default())?
+        .plan
+        .plan)
 }
 
 /// `activesense serial ...`.
@@ -355,7 +420,11 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             Ok(())
         }
         SerialCommand::Run(r) => {
-            let plan = read_plan_file(&r.plan)?;
+            let loaded = crate::planfile::load_plan(&r.plan, &r.read.options())?;
+            for w in &loaded.warnings {
+                eprintln!("warning: {}: {w}", loaded.plan.name);
+            }
+            let plan = loaded.plan.plan;
             let spec = LinkSpec::Serial {
                 path: r.port.clone(),
                 baud: r.baud,
@@ -368,6 +437,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                 .with_context(|| format!("handshake on {}", r.port))?;
             println!("device: {} (protocol v{})", info.firmware, info.protocol);
             let mut t = Totals {
+                pose_errors: Vec::new(),
                 episodes: 0,
                 actions: 0,
                 measurements: 0,
@@ -400,7 +470,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                 let reference = r.episode.verify.then(mk);
                 let run = run_one(&mut link, &p, &params, inst, reference)
                     .with_context(|| format!("episode {i} on {}", r.port))?;
-                print_run(&format!("episode {i}"), &run, &mut t);
+                print_run(&format!("episode {i}"), &run, &p, &params, &mut t);
             }
             print_totals(&t, start.elapsed().as_secs_f64());
             // A real instrument keeps running: no Shutdown, just leave the session.

@@ -306,6 +306,7 @@ pub fn run(opts: &AggregateOptions, policy: &LearntPolicy, command: &str) -> Agg
                 config: EpisodeConfig::default(),
                 sensor: Default::default(),
                 termination: Termination::Oracle,
+                user_plan: None,
             };
             let t = record_episode(&spec, policy);
             bar.inc(1);

@@ -170,8 +170,8 @@ pub fn render_page(t: &Trajectory, source: &str) -> Result<String> {
     // Inside <script> only "</" could end the element early; "<\/" is the same JSON string.
     let data = data.replace("</", "<\\/");
     let title = format!(
-        "activesense inspect: plan {} {} K={} ({})",
-        t.spec.plan_seed,
+        "activesense inspect: {} {} K={} ({})",
+        t.spec.plan_label(),
         t.spec.agent.name(),
         t.spec.rot_bins,
         source

@@ -455,7 +455,7 @@ pub fn run_agent_episode_observed(
         AgentKind::Oigm | AgentKind::OigmCost => {
             // The oracle needs the room and the truth the episode will have: the same
             // seeds give the same world.
-            let plan = crate::plans::generate(spec.plan_seed);
+            let plan = spec.plan();
             let truth = crate::world::SimWorld::new(
                 plan.clone(),
                 spec.sensor,
@@ -473,7 +473,7 @@ pub fn run_agent_episode_observed(
             timed(spec, &mut agent)
         }
         AgentKind::Eem => {
-            let plan = crate::plans::generate(spec.plan_seed);
+            let plan = spec.plan();
             let mut agent = crate::greedy::EemAgent::new(plan, spec.sensor, spec.config);
             timed(spec, &mut agent)
         }

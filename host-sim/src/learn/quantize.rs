@@ -579,6 +579,7 @@ pub fn test_spec(plan_seed: u32, rot_bins: u8) -> EpisodeSpec {
         config: EpisodeConfig::default(),
         sensor: SensorModel::default(),
         termination: Termination::Oracle,
+        user_plan: None,
     }
 }
 

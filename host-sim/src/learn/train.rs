@@ -245,6 +245,7 @@ impl Env {
             },
             sensor: SensorModel::default(),
             termination: Termination::Oracle,
+            user_plan: None,
         }
     }
 

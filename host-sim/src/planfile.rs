@@ -1,0 +1,1058 @@
+//! The user's own floor plans (`--plan FILE`, `--plans-from DIR|FILE...`): reading a room
+//! outline from our JSON, GeoJSON or DXF into a validated, centred [`FloorPlan`].
+//!
+//! Formats (`docs/PLANS.md`):
+//! - **our JSON** `{"vertices": [[x, y], ...]}` (optional `"name"`), metres;
+//! - **GeoJSON** a `Polygon`, a `Feature` with a Polygon geometry, or a `FeatureCollection`
+//!   of them (one room per feature); the outer ring is the room, holes are ignored with a
+//!   warning; coordinates are metres in a projected frame (longitude / latitude is refused);
+//! - **DXF** closed `LWPOLYLINE` / `POLYLINE` entities (closed flag, or first vertex equal to
+//!   the last) on the layer named by `--layer`, or on the only layer that holds any; units
+//!   from `$INSUNITS` when set (unitless = metres). Arc segments (bulges) are refused.
+//!
+//! `--units mm|cm|m` overrides the file's units. A `.json` file is GeoJSON when its top-level
+//! object has a `"type"` member. The closing vertex of a ring (equal to the first) is
+//! dropped; either orientation is accepted. Every rejection is a [`PlanFileError`] whose
+//! one-line message starts with the file (and room) and names the vertex or entity at
+//! fault; nothing here panics on bad input.
+
+use activesense_core::episode::EpisodeConfig;
+use activesense_core::geometry::v2;
+use activesense_core::pipeline::{PipelineParams, Termination};
+use activesense_core::runner::EpisodeRunner;
+use activesense_core::{FloorPlan, PlanError, Pose2, MAX_VERTICES};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// Length unit of a plan file's coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Units {
+    /// Millimetres.
+    Mm,
+    /// Centimetres.
+    Cm,
+    /// Metres (the default).
+    M,
+}
+
+impl Units {
+    /// Metres per unit.
+    pub fn scale(self) -> f64 {
+        match self {
+            Units::Mm => 0.001,
+            Units::Cm => 0.01,
+            Units::M => 1.0,
+        }
+    }
+
+    /// `mm`, `cm` or `m`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Units::Mm => "mm",
+            Units::Cm => "cm",
+            Units::M => "m",
+        }
+    }
+}
+
+/// Command-line parser for `--units`.
+pub fn parse_units(s: &str) -> Result<Units, String> {
+    match s {
+        "mm" => Ok(Units::Mm),
+        "cm" => Ok(Units::Cm),
+        "m" => Ok(Units::M),
+        _ => Err(format!("unknown unit '{s}' (expected mm, cm or m)")),
+    }
+}
+
+/// How to read plan files.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// Overrides the file's units (`--units`).
+    pub units: Option<Units>,
+    /// DXF layer holding the room outlines (`--layer`).
+    pub layer: Option<String>,
+    /// Which room of a multi-room file `load_plan` takes: its name or 0-based index
+    /// (`--room`).
+    pub room: Option<String>,
+}
+
+/// A user's room: its name (file name, and `#room` inside a multi-room file) and the
+/// validated model-frame plan.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NamedPlan {
+    /// `file.ext` or `file.ext#room`.
+    pub name: String,
+    /// The plan, centred on its perimeter centroid (the model frame).
+    pub plan: FloorPlan,
+}
+
+impl NamedPlan {
+    /// The plan seed an episode in this room uses for its seed derivation (the world and
+    /// agent streams): FNV-1a of the name, so the same room gets the same placement and
+    /// noise whatever else is in the directory.
+    pub fn seed(&self) -> u32 {
+        self.name.bytes().fold(0x811c_9dc5u32, |h, b| {
+            (h ^ b as u32).wrapping_mul(0x0100_0193)
+        })
+    }
+}
+
+/// A loaded room with the remarks made while reading it (holes ignored, units used).
+#[derive(Clone, Debug)]
+pub struct LoadedPlan {
+    /// The room.
+    pub plan: NamedPlan,
+    /// Warnings to show the user.
+    pub warnings: Vec<String>,
+}
+
+/// Why a plan file was refused: the file, the room inside it (if any) and the reason.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlanFileError {
+    /// The file.
+    pub path: PathBuf,
+    /// The room (feature or entity) inside the file, when the file holds several.
+    pub room: Option<String>,
+    /// What is wrong.
+    pub reason: String,
+}
+
+impl fmt::Display for PlanFileError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.path.display())?;
+        if let Some(r) = &self.room {
+            write!(f, " ({r})")?;
+        }
+        write!(f, ": {}", self.reason)
+    }
+}
+
+impl std::error::Error for PlanFileError {}
+
+fn err(path: &Path, room: Option<String>, reason: impl Into<String>) -> PlanFileError {
+    PlanFileError {
+        path: path.to_path_buf(),
+        room,
+        reason: reason.into(),
+    }
+}
+
+/// The plan-reading options shared by `episode`, `eval`, `sim` and `serial run`.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct PlanReadArgs {
+    /// Units of the plan files' coordinates, overriding the file (default: metres; DXF:
+    /// its $INSUNITS when set).
+    #[arg(long, value_parser = parse_units)]
+    pub units: Option<Units>,
+    /// DXF layer holding the room outlines (default: the only layer with closed polylines).
+    #[arg(long)]
+    pub layer: Option<String>,
+    /// With --plan: the room of a multi-room file (its name or 0-based index).
+    #[arg(long)]
+    pub room: Option<String>,
+}
+
+impl PlanReadArgs {
+    /// As [`LoadOptions`].
+    pub fn options(&self) -> LoadOptions {
+        LoadOptions {
+            units: self.units,
+            layer: self.layer.clone(),
+            room: self.room.clone(),
+        }
+    }
+}
+
+/// The rooms a command runs in: the one of `plan` (`--plan`), or every room of
+/// `plans_from` (`--plans-from`; refused files are listed on stderr and returned), or `None`
+/// for generated plans. Warnings go to stderr. Fails when no room is usable.
+pub fn rooms_for_command(
+    plan: Option<&Path>,
+    plans_from: &[PathBuf],
+    read: &PlanReadArgs,
+) -> anyhow::Result<Option<(Vec<NamedPlan>, Vec<PlanFileError>)>> {
+    let opts = read.options();
+    let (good, bad) = match (plan, plans_from.is_empty()) {
+        (Some(_), false) => anyhow::bail!("give either --plan or --plans-from, not both"),
+        (Some(p), true) => (vec![load_plan(p, &opts)?], Vec::new()),
+        (None, false) => load_plans_from(plans_from, &opts),
+        (None, true) => return Ok(None),
+    };
+    for g in &good {
+        for w in &g.warnings {
+            eprintln!("warning: {}: {w}", g.plan.name);
+        }
+    }
+    for b in &bad {
+        eprintln!("refused: {b}");
+    }
+    if good.is_empty() {
+        anyhow::bail!(
+            "no usable floor plan ({} file(s) refused, listed above)",
+            bad.len()
+        );
+    }
+    if !bad.is_empty() {
+        eprintln!(
+            "{} room(s) loaded, {} file(s) refused",
+            good.len(),
+            bad.len()
+        );
+    }
+    Ok(Some((good.into_iter().map(|g| g.plan).collect(), bad)))
+}
+
+/// File formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Format {
+    Json,
+    GeoJson,
+    Dxf,
+}
+
+fn format_of(path: &Path) -> Option<Format> {
+    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+    match ext.as_str() {
+        "json" => Some(Format::Json),
+        "geojson" => Some(Format::GeoJson),
+        "dxf" => Some(Format::Dxf),
+        _ => None,
+    }
+}
+
+/// One outline as read from a file, before validation: its name inside a multi-room file,
+/// vertices in file units, warnings.
+struct RawRoom {
+    name: Option<String>,
+    vertices: Vec<[f64; 2]>,
+    warnings: Vec<String>,
+}
+
+/// Every room of a plan file, in file order.
+pub fn load_rooms(path: &Path, opts: &LoadOptions) -> Result<Vec<LoadedPlan>, PlanFileError> {
+    let format = format_of(path).ok_or_else(|| {
+        err(
+            path,
+            None,
+            "unknown plan format (expected .json, .geojson or .dxf)",
+        )
+    })?;
+    let (rooms, file_units) = match format {
+        Format::Json | Format::GeoJson => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| err(path, None, format!("cannot read: {e}")))?;
+            let value: serde_json::Value = serde_json::from_str(&text)
+                .map_err(|e| err(path, None, format!("not valid JSON: {e}")))?;
+            let geo = format == Format::GeoJson || value.get("type").is_some();
+            let rooms = if geo {
+                geojson_rooms(path, &value)?
+            } else {
+                vec![our_json_room(path, &value)?]
+            };
+            (rooms, None)
+        }
+        Format::Dxf => dxf_rooms(path, opts)?,
+    };
+    let units = opts.units.map(|u| (u.scale(), u.name()));
+    let mut notes = Vec::new();
+    if let (None, Some((_, name))) = (units, file_units) {
+        notes.push(format!("coordinates in {name} ($INSUNITS)"));
+    }
+    let (scale, unit_name) = units.or(file_units).unwrap_or((1.0, "m"));
+    let stem = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string());
+    let many = rooms.len() > 1;
+    let mut out = Vec::with_capacity(rooms.len());
+    for (i, raw) in rooms.into_iter().enumerate() {
+        let label = raw.name.clone().unwrap_or_else(|| format!("room {i}"));
+        let room = many.then(|| label.clone());
+        let plan = validate(path, room.clone(), &raw.vertices, scale, unit_name)?;
+        let name = if many {
+            format!(
+                "{stem}#{}",
+                raw.name.clone().unwrap_or_else(|| i.to_string())
+            )
+        } else {
+            stem.clone()
+        };
+        let mut warnings = raw.warnings;
+        warnings.extend(notes.iter().cloned());
+        out.push(LoadedPlan {
+            plan: NamedPlan { name, plan },
+            warnings,
+        });
+    }
+    Ok(out)
+}
+
+/// The one room of a plan file (`--plan`): a file with several rooms needs
+/// `opts.room` (a room name or 0-based index).
+pub fn load_plan(path: &Path, opts: &LoadOptions) -> Result<LoadedPlan, PlanFileError> {
+    let mut rooms = load_rooms(path, opts)?;
+    let names = |rooms: &[LoadedPlan]| {
+        rooms
+            .iter()
+            .map(|r| r.plan.name.clone())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    match &opts.room {
+        None if rooms.len() == 1 => Ok(rooms.remove(0)),
+        None => Err(err(
+            path,
+            None,
+            format!(
+                "holds {} rooms ({}); choose one with --room NAME|INDEX, or evaluate all with --plans-from",
+                rooms.len(),
+                names(&rooms)
+            ),
+        )),
+        Some(r) => {
+            let by_name = rooms
+                .iter()
+                .position(|p| p.plan.name.rsplit_once('#').map(|x| x.1) == Some(r.as_str()));
+            let by_index = r.parse::<usize>().ok().filter(|i| *i < rooms.len());
+            match by_name.or(by_index) {
+                Some(i) => Ok(rooms.swap_remove(i)),
+                None => Err(err(
+                    path,
+                    None,
+                    format!("no room '{r}' (rooms: {})", names(&rooms)),
+                )),
+            }
+        }
+    }
+}
+
+/// Every room of `paths` (files, and directories whose `.json` / `.geojson` / `.dxf`
+/// files are read in name order, not recursively), and the files that were refused with
+/// why. A bad file never stops the others.
+pub fn load_plans_from(
+    paths: &[PathBuf],
+    opts: &LoadOptions,
+) -> (Vec<LoadedPlan>, Vec<PlanFileError>) {
+    let mut files = Vec::new();
+    let mut bad = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            match std::fs::read_dir(p) {
+                Ok(rd) => {
+                    let mut found: Vec<PathBuf> = rd
+                        .filter_map(|e| e.ok().map(|e| e.path()))
+                        .filter(|f| !f.is_dir() && format_of(f).is_some())
+                        .collect();
+                    found.sort();
+                    if found.is_empty() {
+                        bad.push(err(
+                            p,
+                            None,
+                            "no .json, .geojson or .dxf files in directory",
+                        ));
+                    }
+                    files.extend(found);
+                }
+                Err(e) => bad.push(err(p, None, format!("cannot read directory: {e}"))),
+            }
+        } else {
+            files.push(p.clone());
+        }
+    }
+    let mut good = Vec::new();
+    for f in files {
+        match load_rooms(&f, opts) {
+            Ok(rooms) => good.extend(rooms),
+            Err(e) => bad.push(e),
+        }
+    }
+    (good, bad)
+}
+
+/// Scales, de-duplicates the closing vertex, orients and validates one outline; errors
+/// name vertices by their index in the file (0-based) and their coordinates.
+fn validate(
+    path: &Path,
+    room: Option<String>,
+    vertices: &[[f64; 2]],
+    scale: f64,
+    unit_name: &str,
+) -> Result<FloorPlan, PlanFileError> {
+    let e = |reason: String| err(path, room.clone(), reason);
+    let mut v: Vec<[f64; 2]> = vertices.to_vec();
+    if v.len() >= 2 && v.first() == v.last() {
+        v.pop();
+    }
+    let n = v.len();
+    if n < 3 {
+        return Err(e(format!("{n} distinct vertices; a room needs at least 3")));
+    }
+    if n > MAX_VERTICES {
+        return Err(e(format!(
+            "{n} vertices; a room may have at most {MAX_VERTICES} (docs/PLANS.md, \"Limits\")"
+        )));
+    }
+    if let Some(i) = v
+        .iter()
+        .position(|p| !p[0].is_finite() || !p[1].is_finite())
+    {
+        return Err(e(format!("vertex {i} has a non-finite coordinate")));
+    }
+    let coords = |i: usize| format!("({}, {})", v[i % n][0], v[i % n][1]);
+    // Orientation from the file's own coordinates (f64), so that indices in errors are the
+    // file's.
+    let area2: f64 = (0..n)
+        .map(|i| {
+            let (a, b) = (v[i], v[(i + 1) % n]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum();
+    let reversed = area2 < 0.0;
+    let (lo, hi) = v
+        .iter()
+        .fold(([f64::MAX; 2], [f64::MIN; 2]), |(lo, hi), p| {
+            (
+                [lo[0].min(p[0]), lo[1].min(p[1])],
+                [hi[0].max(p[0]), hi[1].max(p[1])],
+            )
+        });
+    let order: Vec<usize> = if reversed {
+        (0..n).rev().collect()
+    } else {
+        (0..n).collect()
+    };
+    // Subtract the bounding-box centre before going to f32, so that surveyed coordinates
+    // far from the origin (national grids) keep their centimetres.
+    let cx = 0.5 * (lo[0] + hi[0]);
+    let cy = 0.5 * (lo[1] + hi[1]);
+    let pts: Vec<_> = order
+        .iter()
+        .map(|&i| {
+            v2(
+                ((v[i][0] - cx) * scale) as f32,
+                ((v[i][1] - cy) * scale) as f32,
+            )
+        })
+        .collect();
+    // Vertex index k of the oriented outline is file vertex order[k]; edge k runs from
+    // order[k] to order[k + 1].
+    let fv = |k: u8| order[k as usize % n];
+    let edge = |k: u8| {
+        let (a, b) = (fv(k), order[(k as usize + 1) % n]);
+        format!("edge {a}–{b} {} → {}", coords(a), coords(b))
+    };
+    FloorPlan::new(&pts)
+        .map(|p| p.centered())
+        .map_err(|pe| {
+            e(match pe {
+                PlanError::TooFewVertices | PlanError::TooManyVertices => pe.to_string(),
+                PlanError::NonFiniteCoordinate(k) => {
+                    format!("vertex {} has a non-finite coordinate", fv(k))
+                }
+                PlanError::BadExtent => {
+                    let (w, h) = ((hi[0] - lo[0]) * scale, (hi[1] - lo[1]) * scale);
+                    let hint = if w > 500.0 || h > 500.0 {
+                        if unit_name == "m" {
+                            "; are the coordinates millimetres? try --units mm"
+                        } else {
+                            ""
+                        }
+                    } else if lo[0] >= -180.0 && hi[0] <= 180.0 && lo[1] >= -90.0 && hi[1] <= 90.0 && w < 0.5 && h < 0.5 {
+                        "; longitude/latitude degrees are not supported, project the plan to metres first"
+                    } else {
+                        ""
+                    };
+                    format!(
+                        "the room is {w:.3} m × {h:.3} m ({unit_name} coordinates); each side must be 0.5–500 m{hint}"
+                    )
+                }
+                PlanError::ZeroLengthEdge(k) => {
+                    format!("{} is shorter than 1 cm (duplicate vertex?)", edge(k))
+                }
+                PlanError::CollinearVertex(k) => format!(
+                    "vertex {} {} lies on the line through its neighbours (remove it)",
+                    fv(k),
+                    coords(fv(k))
+                ),
+                PlanError::SelfIntersection(a, b) => format!(
+                    "the outline crosses itself: {} touches {}",
+                    edge(a),
+                    edge(b)
+                ),
+                PlanError::Clockwise => "the outline has zero area".to_string(),
+            })
+        })
+        .and_then(|plan| {
+            fits_pipeline(&plan).map_err(e)?;
+            Ok(plan)
+        })
+}
+
+/// Starts an episode in `plan` with both rotation settings, so that a plan the pipeline
+/// cannot take is refused here and never reaches an episode.
+fn fits_pipeline(plan: &FloorPlan) -> Result<(), String> {
+    let mut runner = Box::new(EpisodeRunner::new_empty());
+    for rot_bins in [1u8, 10] {
+        let params = PipelineParams {
+            rot_bins,
+            known_heading: (rot_bins == 1).then_some(0.0),
+            ground_truth: Some(Pose2::new(0.0, 0.0, 0.0)),
+            termination: Termination::Oracle,
+            registration_seed: 0,
+            min_observability: 0.0,
+        };
+        runner
+            .start(plan, &params, EpisodeConfig::default(), 0)
+            .map_err(|e| format!("the localizer cannot take this room: {e:?}"))?;
+    }
+    Ok(())
+}
+
+fn our_json_room(path: &Path, value: &serde_json::Value) -> Result<RawRoom, PlanFileError> {
+    let verts = value.get("vertices").ok_or_else(|| {
+        err(
+            path,
+            None,
+            "no \"vertices\" member: expected {\"vertices\": [[x, y], ...]} or a GeoJSON object with a \"type\"",
+        )
+    })?;
+    let vertices =
+        coords_array(verts).map_err(|r| err(path, None, format!("\"vertices\": {r}")))?;
+    Ok(RawRoom {
+        name: value
+            .get("name")
+            .and_then(|n| n.as_str())
+            .map(str::to_string),
+        vertices,
+        warnings: Vec::new(),
+    })
+}
+
+/// `[[x, y], ...]` (a third coordinate is ignored, as GeoJSON allows).
+fn coords_array(v: &serde_json::Value) -> Result<Vec<[f64; 2]>, String> {
+    let arr = v.as_array().ok_or("expected an array of [x, y] pairs")?;
+    arr.iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let xy = p.as_array().filter(|a| a.len() >= 2);
+            match xy.map(|a| (a[0].as_f64(), a[1].as_f64())) {
+                Some((Some(x), Some(y))) => Ok([x, y]),
+                _ => Err(format!("vertex {i} is not an [x, y] pair of numbers: {p}")),
+            }
+        })
+        .collect()
+}
+
+fn geojson_rooms(path: &Path, value: &serde_json::Value) -> Result<Vec<RawRoom>, PlanFileError> {
+    let ty = value.get("type").and_then(|t| t.as_str()).unwrap_or("");
+    match ty {
+        "FeatureCollection" => {
+            let features = value
+                .get("features")
+                .and_then(|f| f.as_array())
+                .ok_or_else(|| err(path, None, "FeatureCollection without a \"features\" array"))?;
+            if features.is_empty() {
+                return Err(err(path, None, "FeatureCollection has no features"));
+            }
+            features
+                .iter()
+                .enumerate()
+                .map(|(i, f)| {
+                    let name = feature_name(f);
+                    let label = format!(
+                        "feature {i}{}",
+                        name.as_ref().map(|n| format!(" '{n}'")).unwrap_or_default()
+                    );
+                    let mut r =
+                        geojson_feature(f).map_err(|reason| err(path, Some(label), reason))?;
+                    r.name = Some(name.unwrap_or_else(|| i.to_string()));
+                    Ok(r)
+                })
+                .collect()
+        }
+        _ => geojson_feature(value)
+            .map(|r| vec![r])
+            .map_err(|reason| err(path, None, reason)),
+    }
+}
+
+fn feature_name(f: &serde_json::Value) -> Option<String> {
+    let props = f.get("properties")?;
+    ["name", "room", "id"]
+        .iter()
+        .find_map(|k| match props.get(*k)? {
+            serde_json::Value::String(s) if !s.is_empty() => Some(s.clone()),
+            serde_json::Value::Number(n) => Some(n.to_string()),
+            _ => None,
+        })
+}
+
+/// A `Feature` (with a Polygon geometry) or a bare `Polygon`.
+fn geojson_feature(v: &serde_json::Value) -> Result<RawRoom, String> {
+    let ty = v.get("type").and_then(|t| t.as_str()).unwrap_or("");
+    let (geometry, name) = match ty {
+        "Feature" => (
+            v.get("geometry")
+                .filter(|g| !g.is_null())
+                .ok_or("Feature without a geometry")?,
+            feature_name(v),
+        ),
+        _ => (v, None),
+    };
+    let gty = geometry.get("type").and_then(|t| t.as_str()).unwrap_or("");
+    if gty != "Polygon" {
+        return Err(if gty.is_empty() {
+            "not a GeoJSON Polygon, Feature or FeatureCollection (no \"type\")".to_string()
+        } else {
+            format!(
+                "geometry type {gty}: a room must be a Polygon{}",
+                if gty == "MultiPolygon" {
+                    " (split the MultiPolygon into one Polygon feature per room)"
+                } else {
+                    ""
+                }
+            )
+        });
+    }
+    let rings = geometry
+        .get("coordinates")
+        .and_then(|c| c.as_array())
+        .ok_or("Polygon without a \"coordinates\" array")?;
+    let outer = rings.first().ok_or("Polygon with no ring")?;
+    let vertices = coords_array(outer).map_err(|r| format!("outer ring: {r}"))?;
+    let mut warnings = Vec::new();
+    if rings.len() > 1 {
+        warnings.push(format!(
+            "{} hole(s) ignored (columns and other inner walls are not modelled)",
+            rings.len() - 1
+        ));
+    }
+    Ok(RawRoom {
+        name,
+        vertices,
+        warnings,
+    })
+}
+
+/// Metres per unit of a DXF `$INSUNITS` value we can convert, with its name.
+fn dxf_units(u: dxf::enums::Units) -> Option<Option<(f64, &'static str)>> {
+    use dxf::enums::Units as U;
+    Some(match u {
+        U::Unitless => None,
+        U::Millimeters => Some((0.001, "mm")),
+        U::Centimeters => Some((0.01, "cm")),
+        U::Decimeters => Some((0.1, "dm")),
+        U::Meters => Some((1.0, "m")),
+        U::Inches => Some((0.0254, "in")),
+        U::Feet => Some((0.3048, "ft")),
+        U::USSurveyFeet => Some((1200.0 / 3937.0, "US survey ft")),
+        _ => return None,
+    })
+}
+
+type DxfRooms = (Vec<RawRoom>, Option<(f64, &'static str)>);
+
+fn dxf_rooms(path: &Path, opts: &LoadOptions) -> Result<DxfRooms, PlanFileError> {
+    use dxf::entities::EntityType;
+    // The dxf crate reads the whole file; a read error is reported with its message.
+    std::fs::metadata(path).map_err(|e| err(path, None, format!("cannot read: {e}")))?;
+    let drawing = std::panic::catch_unwind(|| dxf::Drawing::load_file(path))
+        .map_err(|_| {
+            err(
+                path,
+                None,
+                "not a readable DXF file (the DXF reader failed)",
+            )
+        })?
+        .map_err(|e| err(path, None, format!("not a readable DXF file: {e}")))?;
+    let units = match dxf_units(drawing.header.default_drawing_units) {
+        Some(u) => u,
+        None if opts.units.is_some() => None,
+        None => {
+            return Err(err(
+                path,
+                None,
+                format!(
+                    "$INSUNITS is {:?}, which we do not convert; give --units mm|cm|m",
+                    drawing.header.default_drawing_units
+                ),
+            ))
+        }
+    };
+    /// A polyline entity: layer, label for messages, vertices, closed, first vertex with a
+    /// bulge, mesh.
+    struct Poly {
+        layer: String,
+        label: String,
+        vertices: Vec<[f64; 2]>,
+        closed: bool,
+        bulge: Option<usize>,
+        mesh: bool,
+    }
+    let mut polys = Vec::new();
+    for ent in drawing.entities() {
+        let layer = ent.common.layer.clone();
+        let handle = ent.common.handle.0;
+        match &ent.specific {
+            EntityType::LwPolyline(p) => {
+                let vertices: Vec<[f64; 2]> = p.vertices.iter().map(|v| [v.x, v.y]).collect();
+                let closed =
+                    p.is_closed() || (vertices.len() > 2 && vertices.first() == vertices.last());
+                polys.push(Poly {
+                    layer,
+                    label: format!("LWPOLYLINE {handle:X} on layer '{}'", ent.common.layer),
+                    bulge: p.vertices.iter().position(|v| v.bulge != 0.0),
+                    vertices,
+                    closed,
+                    mesh: false,
+                });
+            }
+            EntityType::Polyline(p) => {
+                let vs: Vec<_> = p.vertices().collect();
+                let vertices: Vec<[f64; 2]> =
+                    vs.iter().map(|v| [v.location.x, v.location.y]).collect();
+                let closed =
+                    p.is_closed() || (vertices.len() > 2 && vertices.first() == vertices.last());
+                polys.push(Poly {
+                    layer,
+                    label: format!("POLYLINE {handle:X} on layer '{}'", ent.common.layer),
+                    bulge: vs.iter().position(|v| v.bulge != 0.0),
+                    vertices,
+                    closed,
+                    mesh: p.is_polyface_mesh() || p.is_3d_polygon_mesh(),
+                });
+            }
+            _ => {}
+        }
+    }
+    let polys: Vec<Poly> = polys.into_iter().filter(|p| !p.mesh).collect();
+    if polys.is_empty() {
+        return Err(err(
+            path,
+            None,
+            "no LWPOLYLINE or POLYLINE entity (draw each room as a closed polyline; blocks are not expanded)",
+        ));
+    }
+    let on_layer: Vec<&Poly> = match &opts.layer {
+        Some(l) => {
+            let v: Vec<&Poly> = polys.iter().filter(|p| &p.layer == l).collect();
+            if v.is_empty() {
+                let mut layers: Vec<&str> = polys.iter().map(|p| p.layer.as_str()).collect();
+                layers.sort();
+                layers.dedup();
+                return Err(err(
+                    path,
+                    None,
+                    format!(
+                        "no polyline on layer '{l}' (layers with polylines: {})",
+                        layers.join(", ")
+                    ),
+                ));
+            }
+            v
+        }
+        None => {
+            let mut layers: Vec<&str> = polys
+                .iter()
+                .filter(|p| p.closed)
+                .map(|p| p.layer.as_str())
+                .collect();
+            layers.sort();
+            layers.dedup();
+            match layers.len() {
+                0 => {
+                    let p = &polys[0];
+                    return Err(err(
+                        path,
+                        None,
+                        format!(
+                            "{} is open (no closed flag, and its first vertex differs from its last); no closed polyline in the file",
+                            p.label
+                        ),
+                    ));
+                }
+                1 => polys.iter().filter(|p| p.layer == layers[0]).collect(),
+                _ => {
+                    return Err(err(
+                        path,
+                        None,
+                        format!(
+                            "closed polylines on several layers ({}); choose one with --layer NAME",
+                            layers.join(", ")
+                        ),
+                    ))
+                }
+            }
+        }
+    };
+    let mut rooms = Vec::new();
+    for (i, p) in on_layer.iter().enumerate() {
+        if !p.closed {
+            return Err(err(
+                path,
+                None,
+                format!(
+                    "{} is open (no closed flag, and its first vertex differs from its last)",
+                    p.label
+                ),
+            ));
+        }
+        if let Some(k) = p.bulge {
+            return Err(err(
+                path,
+                None,
+                format!(
+                    "{}: vertex {k} starts an arc (bulge); arcs are not supported, replace them by straight segments",
+                    p.label
+                ),
+            ));
+        }
+        rooms.push(RawRoom {
+            name: (on_layer.len() > 1).then(|| i.to_string()),
+            vertices: p.vertices.clone(),
+            warnings: Vec::new(),
+        });
+    }
+    Ok((rooms, units))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An L-shaped room (metres, counter-clockwise).
+    pub const L_ROOM: [[f64; 2]; 6] = [
+        [0.0, 0.0],
+        [6.0, 0.0],
+        [6.0, 3.0],
+        [2.5, 3.0],
+        [2.5, 5.0],
+        [0.0, 5.0],
+    ];
+
+    fn dir(tag: &str) -> PathBuf {
+        let d =
+            std::env::temp_dir().join(format!("activesense-planfile-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn expected() -> FloorPlan {
+        let pts: Vec<_> = L_ROOM
+            .iter()
+            .map(|p| v2(p[0] as f32, p[1] as f32))
+            .collect();
+        FloorPlan::new(&pts).unwrap().centered()
+    }
+
+    fn assert_same(plan: &FloorPlan) {
+        let e = expected();
+        assert_eq!(plan.len(), e.len());
+        // Same vertices up to the starting vertex.
+        let start = (0..plan.len())
+            .find(|&s| (plan.vertex(s) - e.vertex(0)).norm() < 1e-4)
+            .expect("first vertex present");
+        for i in 0..e.len() {
+            let d = (plan.vertex(start + i) - e.vertex(i)).norm();
+            assert!(
+                d < 1e-4,
+                "vertex {i}: {:?} vs {:?}",
+                plan.vertex(start + i),
+                e.vertex(i)
+            );
+        }
+    }
+
+    fn dxf_text(layer_polys: &[(&str, &[[f64; 2]], bool)], insunits: Option<i16>) -> String {
+        let mut s = String::new();
+        if let Some(u) = insunits {
+            s += &format!(
+                "0\nSECTION\n2\nHEADER\n9\n$ACADVER\n1\nAC1015\n9\n$INSUNITS\n70\n{u}\n0\nENDSEC\n"
+            );
+        }
+        s += "0\nSECTION\n2\nENTITIES\n";
+        for (h, (layer, pts, closed)) in layer_polys.iter().enumerate() {
+            s += &format!(
+                "0\nLWPOLYLINE\n5\n{:X}\n8\n{layer}\n100\nAcDbPolyline\n90\n{}\n70\n{}\n",
+                h + 0x20,
+                pts.len(),
+                if *closed { 1 } else { 0 }
+            );
+            for p in pts.iter() {
+                s += &format!("10\n{}\n20\n{}\n", p[0], p[1]);
+            }
+        }
+        s += "0\nENDSEC\n0\nEOF\n";
+        s
+    }
+
+    #[test]
+    fn each_format_round_trips_the_l_room() {
+        let d = dir("rt");
+        let opts = LoadOptions::default();
+        let json = d.join("l.json");
+        std::fs::write(&json, serde_json::json!({ "vertices": L_ROOM }).to_string()).unwrap();
+        assert_same(&load_plan(&json, &opts).unwrap().plan.plan);
+        // GeoJSON: clockwise, closed ring, in millimetres.
+        let mut ring: Vec<[f64; 2]> = L_ROOM
+            .iter()
+            .rev()
+            .map(|p| [p[0] * 1000.0, p[1] * 1000.0])
+            .collect();
+        ring.push(ring[0]);
+        let geo = d.join("l.geojson");
+        std::fs::write(
+            &geo,
+            serde_json::json!({"type": "Polygon", "coordinates": [ring]}).to_string(),
+        )
+        .unwrap();
+        let mm = LoadOptions {
+            units: Some(Units::Mm),
+            ..Default::default()
+        };
+        assert_same(&load_plan(&geo, &mm).unwrap().plan.plan);
+        // DXF in centimetres ($INSUNITS = 5), far from the origin.
+        let cm: Vec<[f64; 2]> = L_ROOM
+            .iter()
+            .map(|p| [p[0] * 100.0 + 5.0e6, p[1] * 100.0 + 2.0e6])
+            .collect();
+        let dxf = d.join("l.dxf");
+        std::fs::write(&dxf, dxf_text(&[("walls", &cm, true)], Some(5))).unwrap();
+        let loaded = load_plan(&dxf, &opts).unwrap();
+        assert_same(&loaded.plan.plan);
+        assert_eq!(loaded.plan.name, "l.dxf");
+    }
+
+    #[test]
+    fn errors_name_file_and_vertex() {
+        let d = dir("err");
+        let opts = LoadOptions::default();
+        let bow = d.join("bow.json");
+        std::fs::write(&bow, r#"{"vertices": [[0,0],[4,0],[0,3],[4,3]]}"#).unwrap();
+        let e = load_plan(&bow, &opts).unwrap_err().to_string();
+        assert!(e.starts_with(&bow.display().to_string()), "{e}");
+        assert!(
+            e.contains("crosses itself")
+                && e.contains("edge 1–2 (4, 0) → (0, 3)")
+                && e.contains("edge 3–0"),
+            "{e}"
+        );
+        // Clockwise input: indices are still the file's.
+        let col = d.join("col.json");
+        std::fs::write(&col, r#"{"vertices": [[0,0],[0,3],[4,3],[4,0],[2,0]]}"#).unwrap();
+        let e = load_plan(&col, &opts).unwrap_err().to_string();
+        assert!(e.contains("vertex 4 (2, 0) lies on the line"), "{e}");
+        let huge = d.join("huge.json");
+        std::fs::write(
+            &huge,
+            r#"{"vertices": [[0,0],[4000,0],[4000,3000],[0,3000]]}"#,
+        )
+        .unwrap();
+        let e = load_plan(&huge, &opts).unwrap_err().to_string();
+        assert!(e.contains("--units mm"), "{e}");
+        let mm = LoadOptions {
+            units: Some(Units::Mm),
+            ..Default::default()
+        };
+        assert_eq!(load_plan(&huge, &mm).unwrap().plan.plan.len(), 4);
+    }
+
+    #[test]
+    fn dxf_layers_and_bulges() {
+        let d = dir("dxf");
+        let opts = LoadOptions::default();
+        let rect: &[[f64; 2]] = &[[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0]];
+        let two = d.join("two.dxf");
+        std::fs::write(
+            &two,
+            dxf_text(&[("a", rect, true), ("b", &L_ROOM, true)], None),
+        )
+        .unwrap();
+        let e = load_plan(&two, &opts).unwrap_err().to_string();
+        assert!(e.contains("several layers (a, b)"), "{e}");
+        let b = LoadOptions {
+            layer: Some("b".into()),
+            ..Default::default()
+        };
+        assert_same(&load_plan(&two, &b).unwrap().plan.plan);
+        let open = d.join("open.dxf");
+        std::fs::write(&open, dxf_text(&[("walls", rect, false)], None)).unwrap();
+        let e = load_plan(&open, &opts).unwrap_err().to_string();
+        assert!(e.contains("LWPOLYLINE 20 on layer 'walls' is open"), "{e}");
+        let arc = d.join("arc.dxf");
+        let text =
+            dxf_text(&[("walls", rect, true)], None).replacen("20\n0\n", "20\n0\n42\n0.5\n", 1);
+        std::fs::write(&arc, text).unwrap();
+        let e = load_plan(&arc, &opts).unwrap_err().to_string();
+        assert!(e.contains("vertex 0 starts an arc"), "{e}");
+    }
+
+    #[test]
+    fn dxf_polyline_and_closing_vertex() {
+        let d = dir("poly");
+        let opts = LoadOptions::default();
+        // An old-style POLYLINE (VERTEX entities, SEQEND), closed by its flag.
+        let mut t = String::from(
+            "0\nSECTION\n2\nENTITIES\n0\nPOLYLINE\n5\n50\n8\nROOMS\n66\n1\n10\n0\n20\n0\n30\n0\n70\n1\n",
+        );
+        for p in L_ROOM {
+            t += &format!("0\nVERTEX\n8\nROOMS\n10\n{}\n20\n{}\n30\n0\n", p[0], p[1]);
+        }
+        t += "0\nSEQEND\n8\nROOMS\n0\nENDSEC\n0\nEOF\n";
+        let poly = d.join("poly.dxf");
+        std::fs::write(&poly, t).unwrap();
+        assert_same(&load_plan(&poly, &opts).unwrap().plan.plan);
+        // An LWPOLYLINE without the closed flag whose last vertex repeats the first.
+        let mut ring = L_ROOM.to_vec();
+        ring.push(ring[0]);
+        let lw = d.join("ring.dxf");
+        std::fs::write(&lw, dxf_text(&[("0", &ring, false)], Some(6))).unwrap();
+        assert_same(&load_plan(&lw, &opts).unwrap().plan.plan);
+        // Two rooms on one layer: --plan needs --room, load_rooms names them by index.
+        let rect: &[[f64; 2]] = &[[10.0, 0.0], [14.0, 0.0], [14.0, 3.0], [10.0, 3.0]];
+        let two = d.join("two-rooms.dxf");
+        std::fs::write(
+            &two,
+            dxf_text(&[("R", &L_ROOM, true), ("R", rect, true)], None),
+        )
+        .unwrap();
+        let rooms = load_rooms(&two, &opts).unwrap();
+        let names: Vec<_> = rooms.iter().map(|r| r.plan.name.as_str()).collect();
+        assert_eq!(names, ["two-rooms.dxf#0", "two-rooms.dxf#1"]);
+        assert!(load_plan(&two, &opts)
+            .unwrap_err()
+            .reason
+            .contains("holds 2 rooms"));
+        let first = LoadOptions {
+            room: Some("0".into()),
+            ..Default::default()
+        };
+        assert_same(&load_plan(&two, &first).unwrap().plan.plan);
+    }
+
+    #[test]
+    fn file_seeds_are_stable() {
+        let p = NamedPlan {
+            name: "office.json".into(),
+            plan: expected(),
+        };
+        assert_eq!(
+            p.seed(),
+            NamedPlan {
+                name: "office.json".into(),
+                plan: expected()
+            }
+            .seed()
+        );
+        assert_ne!(
+            p.seed(),
+            NamedPlan {
+                name: "office2.json".into(),
+                plan: expected()
+            }
+            .seed()
+        );
+    }
+}
