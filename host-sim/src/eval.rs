@@ -1093,40 +1093,37 @@ pub fn extra_markdown(r: &ExtraReport, command: &str) -> String {
             let _ = write!(head, " {} (minimal set {:.2}) |", g.agent, g.minimal_set);
             rule.push_str("---|");
         }
-        let _ = writeln!(s, "{head}\n{rule}");
-        for j in 0..=r.extra {
-            let mut line = format!("| +{j} |");
-            for g in &groups {
-                let _ = write!(
-                    line,
-                    " {} / {} / {} (n = {}) |",
-                    opt(g.mean[j], 4),
-                    opt(g.median[j], 4),
-                    opt(g.p90[j], 4),
-                    g.episodes[j]
-                );
+        let table = |s: &mut String, cell: &dyn Fn(&ExtraGroup, usize) -> String| {
+            let _ = writeln!(s, "{head}\n{rule}");
+            for j in 0..=r.extra {
+                let mut line = format!("| +{j} |");
+                for g in &groups {
+                    let _ = write!(line, " {} |", cell(g, j));
+                }
+                let _ = writeln!(s, "{line}");
             }
-            let _ = writeln!(s, "{line}");
-        }
-        let _ = writeln!(s);
+            let _ = writeln!(s);
+        };
+        table(&mut s, &|g, j| {
+            format!(
+                "{} / {} / {} (n = {})",
+                opt(g.mean[j], 4),
+                opt(g.median[j], 4),
+                opt(g.p90[j], 4),
+                g.episodes[j]
+            )
+        });
         let _ = writeln!(
             s,
             "Still recognised (the belief argmax is still a coarse success) / mean pose error over those (m):\n"
         );
-        let _ = writeln!(s, "{head}\n{rule}");
-        for j in 0..=r.extra {
-            let mut line = format!("| +{j} |");
-            for g in &groups {
-                let _ = write!(
-                    line,
-                    " {:.3} / {} |",
-                    g.still_recognised.get(j).copied().unwrap_or(0.0),
-                    opt(g.mean_still_recognised.get(j).copied().flatten(), 4)
-                );
-            }
-            let _ = writeln!(s, "{line}");
-        }
-        let _ = writeln!(s);
+        table(&mut s, &|g, j| {
+            format!(
+                "{:.3} / {}",
+                g.still_recognised.get(j).copied().unwrap_or(0.0),
+                opt(g.mean_still_recognised.get(j).copied().flatten(), 4)
+            )
+        });
     }
     s
 }
