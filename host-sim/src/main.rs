@@ -46,7 +46,8 @@ enum Command {
     /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
     Dataset(DatasetArgs),
     /// Evaluate agents on the test plans (the paper's Table 4): writes results.json,
-    /// results.md, timing.json and budget.svg into --out.
+    /// results.md, timing.json, budget.svg and the utility-vs-cost curves utility-k{K}.svg
+    /// into --out (or, with --extra-measurements, the pose error past the minimal set).
     Eval(EvalArgs),
     /// Measure sparse-registration accuracy from coarse poses on the test plans.
     BenchRegistration(BenchRegistrationArgs),
@@ -162,7 +163,8 @@ struct BenchRegistrationArgs {
 
 #[derive(Args)]
 struct EvalArgs {
-    /// Comma-separated agent names (blind-0..2, heuristic-0..3, learnt, learnt-int8), or
+    /// Comma-separated agent names (blind-0..2, heuristic-0..3, learnt, learnt-int8, and the
+    /// greedy benchmarks oigm, oigm-cost, eem), or
     /// "all" for the learnt policy (float and int8) and the seven Table-3 baselines.
     #[arg(long, default_value = "all", value_parser = parse_agents)]
     agents: AgentList,
@@ -345,7 +347,7 @@ struct EpisodeArgs {
     #[arg(long, default_value_t = 0.0)]
     min_observability: f32,
     /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
-    /// learnt.
+    /// learnt, learnt-int8, or the greedy benchmarks oigm, oigm-cost, eem (docs/BENCHMARKS.md).
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
     agent: AgentKind,
     /// Policy file for the learnt agent (default: the committed policies/k{K}/policy.policy).
