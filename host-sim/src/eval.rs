@@ -231,6 +231,9 @@ pub struct GroupResult {
     pub pose_error_ci95: Option<[f64; 2]>,
     /// Median refined pose error over recognised episodes (m).
     pub pose_error_median: Option<f64>,
+    /// 95th percentile of the refined pose error over recognised episodes (m): the tail.
+    #[serde(default)]
+    pub pose_error_p95: Option<f64>,
     /// Mean refined pose error over all registered episodes, recognised or not (m).
     pub pose_error_all: Option<f64>,
     /// Mean coarse (pre-ICP) pose error over all episodes with a belief (m).
@@ -434,6 +437,11 @@ fn aggregate(
         pose_error: pe_ci.map(|c| c.mean),
         pose_error_ci95: pe_ci.map(|c| [c.lo, c.hi]),
         pose_error_median: median(&mut pe_rec.clone()),
+        pose_error_p95: {
+            let mut sorted = pe_rec.clone();
+            sorted.sort_by(f64::total_cmp);
+            quantile(&sorted, 0.95)
+        },
         pose_error_all: MeanCi::of(&pe).map(|c| c.mean),
         coarse_error: MeanCi::of(&ce).map(|c| c.mean),
         measurements: m.mean,
@@ -671,9 +679,9 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         );
         let _ = writeln!(
             s,
-            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | cost | repeated bearings | episode time (s) | time per decision (ms) |"
+            "| agent | recognition rate [95% CI] | pose error (m) [95% CI] | median pose error (m) | p95 pose error (m) | pose error, all episodes (m) | coarse error (m) | measurements [95% CI] | rotations [95% CI] | cost | repeated bearings | episode time (s) | time per decision (ms) |"
         );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|");
         for (g, r) in report
             .results
             .iter()
@@ -682,7 +690,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         {
             let _ = writeln!(
                 s,
-                "| {} | {:.3} [{:.3}, {:.3}] | {} [{}, {}] | {} | {} | {} | {:.2} [{:.2}, {:.2}] | {:.2} [{:.2}, {:.2}] | {:.3} | {:.2} | {:.1} | {:.3} |",
+                "| {} | {:.3} [{:.3}, {:.3}] | {} [{}, {}] | {} | {} | {} | {} | {:.2} [{:.2}, {:.2}] | {:.2} [{:.2}, {:.2}] | {:.3} | {:.2} | {:.1} | {:.3} |",
                 r.agent,
                 r.recognition_rate,
                 r.recognition_ci95[0],
@@ -691,6 +699,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
                 opt(r.pose_error_ci95.map(|c| c[0]), 4),
                 opt(r.pose_error_ci95.map(|c| c[1]), 4),
                 opt(r.pose_error_median, 4),
+                opt(r.pose_error_p95, 4),
                 opt(r.pose_error_all, 4),
                 opt(r.coarse_error, 3),
                 r.measurements,
