@@ -127,6 +127,10 @@ pub struct EpisodeRow {
     /// Measurements taken at an encoder bearing already measured in the episode.
     #[serde(default)]
     pub repeated_bearings: u16,
+    /// The belief's stated confidence at the end: PMF mass within the coarse tolerance of
+    /// the argmax and its symmetric equivalents (0 without a vote).
+    #[serde(default)]
+    pub final_peak_mass: f32,
 }
 
 impl EpisodeRow {
@@ -141,6 +145,7 @@ impl EpisodeRow {
             pose_error: t.outcome.pose_error,
             coarse_error: t.outcome.coarse_error,
             symmetry_order: t.outcome.symmetry_order,
+            final_peak_mass: 0.0,
             repeated_bearings: {
                 let mut seen = std::collections::BTreeSet::new();
                 t.steps
@@ -262,6 +267,9 @@ pub struct GroupResult {
     /// Utility against accumulated cost (eq. 15).
     #[serde(default)]
     pub curve: UtilityCurve,
+    /// Reliability of the belief's stated confidence at the end of the episode.
+    #[serde(default)]
+    pub reliability: Reliability,
     /// Per-episode rows, in plan order.
     pub episodes: Vec<EpisodeRow>,
 }
@@ -297,6 +305,8 @@ struct CurveRecorder {
     register: bool,
     /// (cost, entropy, recognised, pose error so far).
     samples: Vec<(f32, f32, bool, Option<f32>)>,
+    /// The belief's peak mass (its stated confidence) after the last vote.
+    peak_mass: f32,
 }
 
 impl CurveRecorder {
@@ -309,6 +319,10 @@ impl CurveRecorder {
             Some(st) => (st.cost, st.coarse_success),
         };
         let measured = v.step.is_some_and(|st| st.range.is_some());
+        if measured {
+            // The belief changes only when a range is voted.
+            self.peak_mass = loc.peak_mass(pipe.symmetry_order());
+        }
         let pose_error = if self.register && measured {
             score(v.plan, v.truth, &v.runner.finish(v.plan)).pose_error
         } else {
@@ -337,6 +351,105 @@ impl CurveRecorder {
         }
         c
     }
+}
+
+/// Bins of the reliability diagram: stated confidence `[i/10, (i+1)/10)` (the last bin
+/// includes 1).
+pub const RELIABILITY_BINS: usize = 10;
+/// Bins with fewer episodes are left out of the diagram (they are in the JSON).
+pub const RELIABILITY_MIN_EPISODES: u32 = 5;
+
+/// Stated confidence (the final belief's peak mass) against observed correctness (coarse
+/// success): a calibrated belief that says 0.9 is right 9 times in 10.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Reliability {
+    /// Episodes per bin.
+    pub episodes: Vec<u32>,
+    /// Mean stated confidence per bin (`None` for an empty bin).
+    pub stated: Vec<Option<f64>>,
+    /// Fraction recognised per bin.
+    pub observed: Vec<Option<f64>>,
+    /// Mean stated confidence over all episodes.
+    pub mean_stated: f64,
+    /// Expected calibration error: the episode-weighted mean |stated − observed| over bins.
+    pub ece: f64,
+}
+
+impl Reliability {
+    fn of(rows: &[EpisodeRow]) -> Self {
+        let mut r = Reliability {
+            episodes: vec![0; RELIABILITY_BINS],
+            ..Default::default()
+        };
+        let mut sum = [0.0f64; RELIABILITY_BINS];
+        let mut right = [0u32; RELIABILITY_BINS];
+        for row in rows {
+            let c = row.final_peak_mass.clamp(0.0, 1.0) as f64;
+            let b = ((c * RELIABILITY_BINS as f64) as usize).min(RELIABILITY_BINS - 1);
+            r.episodes[b] += 1;
+            sum[b] += c;
+            right[b] += row.recognised as u32;
+        }
+        let n = rows.len().max(1) as f64;
+        for b in 0..RELIABILITY_BINS {
+            let k = r.episodes[b];
+            let (st, ob) = if k > 0 {
+                (Some(sum[b] / k as f64), Some(right[b] as f64 / k as f64))
+            } else {
+                (None, None)
+            };
+            if let (Some(st), Some(ob)) = (st, ob) {
+                r.ece += k as f64 / n * (st - ob).abs();
+            }
+            r.stated.push(st);
+            r.observed.push(ob);
+        }
+        r.mean_stated = sum.iter().sum::<f64>() / n;
+        r
+    }
+}
+
+/// The reliability diagram of one rotation setting, one line per agent.
+pub fn reliability_svg(report: &EvalReport, k: u8) -> String {
+    use crate::plot::{line_panels, LinePanel, Series};
+    let mut series = vec![Series {
+        name: "calibrated (stated = observed)".into(),
+        points: vec![(0.0, Some(0.0)), (1.0, Some(1.0))],
+    }];
+    for r in report.results.iter().filter(|r| r.rot_bins == k) {
+        series.push(Series {
+            name: r.agent.clone(),
+            points: r
+                .reliability
+                .stated
+                .iter()
+                .zip(&r.reliability.observed)
+                .zip(&r.reliability.episodes)
+                .filter(|(_, &n)| n >= RELIABILITY_MIN_EPISODES)
+                .filter_map(|((s, o), _)| s.map(|s| (s, *o)))
+                .collect(),
+        });
+    }
+    let tag = if k == 1 {
+        "1 rotation bin"
+    } else {
+        "10 rotation bins"
+    };
+    line_panels(
+        &format!(
+            "Final belief's confidence vs correctness, {tag}, termination {:?}",
+            report.options.termination
+        ),
+        &[LinePanel {
+            title: format!("bins with ≥ {RELIABILITY_MIN_EPISODES} episodes"),
+            xlabel: "stated confidence: final belief's peak mass (bin mean)".into(),
+            ylabel: "fraction of episodes recognised".into(),
+            x: (0.0, 1.0),
+            y: (0.0, 1.0),
+            series,
+        }],
+        1,
+    )
 }
 
 /// Utility against accumulated action cost (eq. 15), averaged over the plans.
@@ -459,6 +572,7 @@ fn aggregate(
         recognition_by_budget: budget_rec,
         pose_error_by_budget: budget_err,
         curve: curve_of(curves, curve_plans.min(n)),
+        reliability: Reliability::of(&rows),
         episodes: rows,
     }
 }
@@ -536,12 +650,14 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
             let mut rec = CurveRecorder {
                 register: i < opts.curve_plans,
                 samples: Vec::new(),
+                peak_mass: 0.0,
             };
             // The policies were loaded for every evaluated setting before the run.
             let (traj, decided) =
                 run_agent_episode_observed(&spec, &opts.policies, &mut |v| rec.observe(v))
                     .expect("policy loaded for every K");
-            let row = EpisodeRow::of(&traj);
+            let mut row = EpisodeRow::of(&traj);
+            row.final_peak_mass = rec.peak_mass;
             bar.inc(1);
             (
                 g,
@@ -716,6 +832,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         }
         let _ = writeln!(s);
         perf_table(&mut s, report, k);
+        reliability_table(&mut s, report, k);
     }
     let _ = writeln!(s, "## Side by side with the paper's Table 4\n");
     let _ = writeln!(
@@ -809,6 +926,28 @@ fn perf_table(s: &mut String, report: &EvalReport, k: u8) {
             let _ = write!(line, " {:.3} |", r.recognition_rate + b * r.cost);
         }
         let _ = writeln!(s, "{line}");
+    }
+    let _ = writeln!(s);
+}
+
+/// Stated confidence against observed recognition per agent (`reliability-k{K}.svg` has
+/// the diagram).
+fn reliability_table(s: &mut String, report: &EvalReport, k: u8) {
+    let _ = writeln!(
+        s,
+        "Reliability of the final belief's stated confidence (peak mass around the argmax) against coarse success; \
+         diagram in `reliability-k{k}.svg`. ECE = expected calibration error over {RELIABILITY_BINS} bins.\n"
+    );
+    let _ = writeln!(
+        s,
+        "| agent | mean stated confidence | observed recognition | ECE |\n|---|---|---|---|"
+    );
+    for r in report.results.iter().filter(|r| r.rot_bins == k) {
+        let _ = writeln!(
+            s,
+            "| {} | {:.3} | {:.3} | {:.3} |",
+            r.agent, r.reliability.mean_stated, r.recognition_rate, r.reliability.ece
+        );
     }
     let _ = writeln!(s);
 }
@@ -918,6 +1057,7 @@ pub fn write_outputs(
     ];
     for &k in &report.options.rot_bins {
         files.push((format!("utility-k{k}.svg"), utility_svg(report, k)));
+        files.push((format!("reliability-k{k}.svg"), reliability_svg(report, k)));
     }
     let mut written = Vec::new();
     for (name, body) in files {
@@ -1224,6 +1364,9 @@ mod tests {
                 r.recognition_ci95[0] <= r.recognition_rate
                     && r.recognition_rate <= r.recognition_ci95[1]
             );
+            let rel = &r.reliability;
+            assert_eq!(rel.episodes.iter().sum::<u32>(), 8);
+            assert!((0.0..=1.0).contains(&rel.ece) && (0.0..=1.0).contains(&rel.mean_stated));
             let last = *r.recognition_by_budget.last().unwrap();
             assert!(last <= r.recognition_rate + 1e-12);
             assert!(r.recognition_by_budget.windows(2).all(|w| w[0] <= w[1]));

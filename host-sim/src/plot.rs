@@ -246,7 +246,10 @@ pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String 
             }
         }
     }
-    let width = LEFT + columns as f64 * (PANEL_W + GAP_X) + 80.0;
+    // Room on the right for the legend's longest label.
+    let longest = names.iter().map(|n| n.chars().count()).max().unwrap_or(0) as f64;
+    let width = (LEFT + columns as f64 * (PANEL_W + GAP_X) - GAP_X + 60.0 + 7.5 * longest)
+        .max(LEFT + columns as f64 * (PANEL_W + GAP_X) + 80.0);
     let height =
         (TOP + rows as f64 * (PANEL_H + GAP_Y) + 20.0).max(TOP + 40.0 + 20.0 * names.len() as f64);
     let mut s = String::new();
