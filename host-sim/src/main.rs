@@ -228,7 +228,7 @@ struct EvalArgs {
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax must reach this (0 = off, as on
     /// the instrument; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
     min_observability: f32,
 }
 
@@ -344,7 +344,7 @@ struct EpisodeArgs {
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax must reach this (0 = off, as on
     /// the instrument; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
     min_observability: f32,
     /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
     /// learnt, learnt-int8, or the greedy benchmarks oigm, oigm-cost, eem (docs/BENCHMARKS.md).
@@ -952,6 +952,15 @@ struct TrainArgs {
     /// without the final-registration-error term).
     #[arg(long, default_value_t = 1.0)]
     registration_reward: f32,
+}
+
+fn parse_observability(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "'{s}' is not an observability threshold (a number from 0 = off to 1; the eigenvalue of readings split evenly between two perpendicular walls is 0.5)"
+        )),
+    }
 }
 
 fn parse_inputs(s: &str) -> Result<activesense_sim::learn::agent::InputMask, String> {

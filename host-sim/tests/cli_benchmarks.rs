@@ -169,3 +169,34 @@ fn ablated_policies_train_and_play_with_their_mask() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("no-belief"));
 }
+
+#[test]
+fn observability_threshold_is_validated_and_used() {
+    let o = activesense(&[
+        "eval",
+        "--agents",
+        "heuristic-1",
+        "--plans",
+        "2",
+        "--min-observability",
+        "nan",
+        "--out",
+        "/tmp/never",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("observability threshold"));
+    // An impossible threshold (above what any readings reach with the heading known)
+    // never lets the oracle stop: the episode runs to its action limit.
+    let o = activesense(&[
+        "episode",
+        "--seed",
+        "1000000",
+        "--min-observability",
+        "0.9",
+        "--max-actions",
+        "40",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("ActionLimit after 40 actions"), "{out}");
+}
