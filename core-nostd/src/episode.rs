@@ -56,6 +56,13 @@ pub struct EpisodeConfig {
     /// the only value the instrument runs so far). Left out of JSON when 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub min_observability: f32,
+    /// The confident stop's risk ([`crate::pipeline::PipelineParams::stop_risk`]).
+    #[serde(default = "default_stop_risk")]
+    pub stop_risk: f32,
+}
+
+fn default_stop_risk() -> f32 {
+    crate::pipeline::DEFAULT_STOP_RISK
 }
 
 fn is_zero(x: &f32) -> bool {
@@ -69,6 +76,7 @@ impl Default for EpisodeConfig {
             max_actions: EVAL_MAX_ACTIONS,
             costs: ActionCosts::default(),
             min_observability: 0.0,
+            stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
         }
     }
 }

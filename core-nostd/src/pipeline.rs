@@ -87,7 +87,15 @@ pub struct PipelineParams {
     /// ([`registration::observability`]) is at least this. 0 turns the test off (the
     /// default, and what the instrument runs: the protocol does not carry it yet).
     pub min_observability: f32,
+    /// [`Termination::Confident`] stops only once the estimated probability that the
+    /// belief argmax is wrong is below this ([`DEFAULT_STOP_RISK`] by default; the
+    /// protocol carries it). Valid: finite, in (0, 1].
+    pub stop_risk: f32,
 }
+
+/// The default of [`PipelineParams::stop_risk`]: stop when the estimated probability of a
+/// wrong registration is below 1 %.
+pub const DEFAULT_STOP_RISK: f32 = 0.01;
 
 /// Why [`Pipeline::start`] refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -165,6 +173,7 @@ impl Pipeline {
                 termination: Termination::ActionLimit,
                 registration_seed: 0,
                 min_observability: 0.0,
+                stop_risk: DEFAULT_STOP_RISK,
             },
             order: 1,
             voted: false,
@@ -414,6 +423,7 @@ pub(crate) mod tests {
             termination: Termination::ActionLimit,
             registration_seed: 1,
             min_observability: 0.0,
+            stop_risk: DEFAULT_STOP_RISK,
         };
         assert_eq!(
             p.start(&l_room(), &base),
@@ -445,6 +455,7 @@ pub(crate) mod tests {
                 termination: Termination::Oracle,
                 registration_seed: 3,
                 min_observability: 0.0,
+                stop_risk: DEFAULT_STOP_RISK,
             },
         )
         .unwrap();

@@ -67,6 +67,7 @@ impl EpisodeRunner {
                         measure: 0.05,
                     },
                     min_observability: 0.0,
+                    stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
                 },
                 bearing_index: 0,
                 actions: 0,
@@ -235,6 +236,7 @@ mod tests {
             termination: Termination::ActionLimit,
             registration_seed: 1,
             min_observability: 0.0,
+            stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
         };
         r.start(&plan, &params, EpisodeConfig::default(), 0)
             .unwrap();

@@ -364,6 +364,7 @@ impl Controller {
             registration_seed: registration_seed(p.seed),
             // Not on the wire yet (protocol v3): the instrument stops as before.
             min_observability: 0.0,
+            stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
         };
         self.running = None;
         // An episode takes the localizer's memory back from a staged upload.

@@ -45,6 +45,7 @@ fuzz_target!(|data: &[u8]| {
         termination: Termination::ActionLimit,
         registration_seed: 1,
         min_observability: 0.0,
+        stop_risk: activesense_core::pipeline::DEFAULT_STOP_RISK,
     };
     if runner
         .start(&plan, &params, EpisodeConfig::default(), 0b101)

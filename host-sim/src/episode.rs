@@ -252,6 +252,7 @@ pub fn pipeline_params(spec: &EpisodeSpec, truth: &Pose2) -> PipelineParams {
         termination: spec.termination,
         registration_seed: spec.registration_seed(),
         min_observability: spec.config.min_observability,
+        stop_risk: spec.config.stop_risk,
     }
 }
 

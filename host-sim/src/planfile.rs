@@ -502,6 +502,7 @@ fn fits_pipeline(plan: &FloorPlan) -> Result<(), String> {
             termination: Termination::Oracle,
             registration_seed: 0,
             min_observability: 0.0,
+            stop_risk: activesense_core::pipeline::DEFAULT_STOP_RISK,
         };
         runner
             .start(plan, &params, EpisodeConfig::default(), 0)
