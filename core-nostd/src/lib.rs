@@ -44,6 +44,7 @@ pub mod pipeline;
 pub mod policy;
 pub mod pose_distance;
 pub mod quantized;
+pub mod refine;
 pub mod registration;
 pub mod runner;
 pub mod session;

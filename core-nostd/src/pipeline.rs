@@ -24,8 +24,10 @@
 use crate::floorplan::FloorPlan;
 use crate::geometry::Pose2;
 use crate::localization::{Confidence, GhtLocalizer, LocError, LocalizerConfig};
+use crate::refine::{self, RefineInput, Refinement};
 use crate::registration::{
-    self, AnnealParams, Measurement, Observability, Observations, Registration, RegistrationError,
+    self, AnnealParams, Measurement, Observability, Observations, RangeModel, Registration,
+    RegistrationError,
 };
 use crate::symmetry::{symmetry_order, SymmetryTolerance};
 use serde::{Deserialize, Serialize};
@@ -132,6 +134,9 @@ pub struct PipelineResult {
     pub symmetry_order: u8,
     /// How well the readings determine the pose at the coarse estimate.
     pub observability: Option<Observability>,
+    /// The winning hypothesis of the multi-hypothesis refinement ([`crate::refine`]);
+    /// its registration is `refined`.
+    pub refinement: Option<Refinement>,
 }
 
 impl PipelineResult {
@@ -331,28 +336,35 @@ impl Pipeline {
             .params
             .ground_truth
             .map(|t| self.voted && self.localizer.coarse_success(&t, self.order));
-        let (refined, registration_error) = match coarse {
+        let (refined, registration_error) = match coarse.map(|_| self.refine(plan)) {
             None => (None, Some(RegistrationError::TooFewObservations)),
-            Some(c) => match registration::register_multistart(
-                plan,
-                &self.observations,
-                &c,
-                &self.registration_params(),
-                self.heading_span(),
-                REGISTRATION_STARTS,
-            ) {
-                Ok(r) => (Some(r), None),
-                Err(e) => (None, Some(e)),
-            },
+            Some(Ok(r)) => (Some(r), None),
+            Some(Err(e)) => (None, Some(e)),
         };
         PipelineResult {
             coarse,
-            refined,
+            refined: refined.map(|r| r.registration),
+            refinement: refined,
             registration_error,
             recognised,
             symmetry_order: self.order,
             observability: self.observability(),
         }
+    }
+
+    /// The multi-hypothesis refinement ([`crate::refine`]) of the readings so far.
+    pub fn refine(&self, plan: &FloorPlan) -> Result<Refinement, RegistrationError> {
+        refine::refine(&RefineInput {
+            plan,
+            obs: &self.observations,
+            localizer: &self.localizer,
+            params: self.registration_params(),
+            screen: refine::screening(&self.registration_params()),
+            heading_span: self.heading_span(),
+            starts: REGISTRATION_STARTS,
+            unknowns: self.min_measurements(),
+            model: RangeModel::default(),
+        })
     }
 
     /// Lends the idle localizer's accumulator memory (see

@@ -81,7 +81,7 @@
 
 use crate::floorplan::{closest_on_segment, FloorPlan};
 use crate::geometry::{length, rotate, unit, v2, Pose2, Vec2};
-use crate::math::{abs, atan2, cos, ln, sin, sqrt, wrap_angle, TAU};
+use crate::math::{abs, atan2, cos, exp, ln, sin, sqrt, wrap_angle, TAU};
 use heapless::Vec as HVec;
 use rand_core::{RngCore, SeedableRng};
 use rand_pcg::Pcg32;
@@ -291,6 +291,76 @@ pub fn observability(
     }
 }
 
+/// The EDM's range model, used to score a pose against the readings: a reading either is
+/// explained (its range residual along the ray is Gaussian) or is an outlier (its range is
+/// uniform over `(0, max_range]`). This is the sensor model of the simulation (`host-sim`
+/// `SensorModel`: σ = 1 cm, 5 % outliers, 50 m), with σ widened to cover the fit's own
+/// imprecision: the registration minimises point-to-wall distances, not range residuals.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RangeModel {
+    /// Standard deviation of an explained reading's range residual (m).
+    pub sigma: f32,
+    /// Probability that a reading is an outlier.
+    pub outlier_prob: f32,
+    /// Extent of the outliers' uniform density (m).
+    pub max_range: f32,
+}
+
+impl Default for RangeModel {
+    fn default() -> Self {
+        RangeModel {
+            sigma: 0.03,
+            outlier_prob: 0.05,
+            max_range: 50.0,
+        }
+    }
+}
+
+/// How well a pose explains the readings under a [`RangeModel`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RangeFit {
+    /// `Σᵢ ln((1−ε)·N(rᵢ; 0, σ²) + ε/R)` over all readings, `rᵢ` the measured minus the
+    /// ray-cast range at the pose (a ray that meets no wall explains nothing).
+    pub log_likelihood: f32,
+    /// Readings within 3σ of the ray-cast range.
+    pub explained: u16,
+}
+
+/// [`RangeFit`] of every reading of `obs` at AgentPose `pose` (excluded or not: the
+/// refinement compares hypotheses on the same readings).
+pub fn range_fit(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    model: &RangeModel,
+) -> RangeFit {
+    let a = pose.translation();
+    let sigma = model.sigma.max(1e-6);
+    let outlier = model.outlier_prob.clamp(0.0, 1.0) / model.max_range.max(1e-6);
+    let peak = (1.0 - model.outlier_prob.clamp(0.0, 1.0)) / (sigma * sqrt(TAU));
+    let (mut log_likelihood, mut explained) = (0.0f32, 0u16);
+    for p in obs.pts.iter() {
+        let measured = length(p.s);
+        let predicted = plan.ray_cast(a, rotate(p.d, pose.theta)).map(|h| h.range);
+        let density = match predicted {
+            Some(r) => {
+                let z = (measured - r) / sigma;
+                if abs(z) <= 3.0 {
+                    explained += 1;
+                }
+                // exp underflows to 0 far out, leaving the outlier density: no NaN.
+                peak * exp(-0.5 * z * z) + outlier
+            }
+            None => outlier,
+        };
+        log_likelihood += ln(density.max(f32::MIN_POSITIVE));
+    }
+    RangeFit {
+        log_likelihood,
+        explained,
+    }
+}
+
 /// Smallest eigenvalue of the symmetric `[[a, b], [b, c]]`.
 fn min_eigen_2x2(a: f32, b: f32, c: f32) -> f32 {
     let mean = 0.5 * (a + c);
@@ -357,6 +427,21 @@ pub struct IcpParams {
     /// Trust region on the heading (rad) around the starting heading; `f32::INFINITY`
     /// disables it.
     pub trust_rotation: f32,
+    /// Readings left out of the fit: indices into the observation set, [`NOT_EXCLUDED`]
+    /// for an unused slot. The multi-hypothesis refinement ([`crate::refine`]) fits "all
+    /// readings but this one (or two)" to find outliers a handful of readings cannot vote
+    /// out. An excluded reading forms no pair and counts neither in `E` nor in the score.
+    #[serde(default = "no_exclusions")]
+    pub exclude: [u16; MAX_EXCLUDED],
+}
+
+/// Most readings one fit can leave out ([`IcpParams::exclude`]).
+pub const MAX_EXCLUDED: usize = 2;
+/// An unused slot of [`IcpParams::exclude`].
+pub const NOT_EXCLUDED: u16 = u16::MAX;
+
+fn no_exclusions() -> [u16; MAX_EXCLUDED] {
+    [NOT_EXCLUDED; MAX_EXCLUDED]
 }
 
 impl Default for IcpParams {
@@ -375,11 +460,22 @@ impl Default for IcpParams {
             accelerate: true,
             trust_translation: f32::INFINITY,
             trust_rotation: f32::INFINITY,
+            exclude: no_exclusions(),
         }
     }
 }
 
 impl IcpParams {
+    /// True when reading `i` is left out of the fit.
+    fn excludes(&self, i: usize) -> bool {
+        self.exclude.iter().any(|&e| e as usize == i)
+    }
+
+    /// Readings of `n` that take part in the fit.
+    fn included(&self, n: usize) -> usize {
+        (0..n).filter(|&i| !self.excludes(i)).count()
+    }
+
     fn validate(&self) -> Result<(), RegistrationError> {
         let ok = self.max_incidence.is_finite()
             && self.max_incidence > 0.0
@@ -579,7 +675,10 @@ fn match_pairs(
 ) -> ErrorSummary {
     pairs.clear();
     let cos_max = cos(params.max_incidence);
-    for o in &obs.pts {
+    for (i, o) in obs.pts.iter().enumerate() {
+        if params.excludes(i) {
+            continue;
+        }
         // Same capacity as the observation set.
         let _ = pairs.push(correspond(plan, o, pose, cos_max, params.relaxed_weight));
     }
@@ -675,7 +774,7 @@ fn check_inputs(
     params: &IcpParams,
 ) -> Result<(), RegistrationError> {
     params.validate()?;
-    if obs.len() < 2 {
+    if params.included(obs.len()) < 2 {
         return Err(RegistrationError::TooFewObservations);
     }
     if !initial.is_finite() {
