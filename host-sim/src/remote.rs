@@ -463,6 +463,8 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                         ground_truth: Some(truth),
                         initial_scan,
                         termination: spec.termination,
+                        stop_risk: spec.config.stop_risk,
+                        min_observability: spec.config.min_observability,
                     };
                     (plan.clone(), params, SimInstrument::new(world))
                 };
