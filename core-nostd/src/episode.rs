@@ -52,8 +52,8 @@ pub struct EpisodeConfig {
     /// Per-action costs.
     pub costs: ActionCosts,
     /// The pipeline's observability stop test
-    /// ([`crate::pipeline::PipelineParams::min_observability`]); 0 = off (the default, and
-    /// the only value the instrument runs so far). Left out of JSON when 0.
+    /// ([`crate::pipeline::PipelineParams::min_observability`]); 0 = off (the default; the
+    /// protocol carries it since v4, so the instrument runs the same). Left out of JSON when 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub min_observability: f32,
     /// The confident stop's risk ([`crate::pipeline::PipelineParams::stop_risk`]).

@@ -87,7 +87,7 @@ pub struct PipelineParams {
     /// Stop only when the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax
     /// ([`registration::observability`]) is at least this. 0 turns the test off (the
-    /// default, and what the instrument runs: the protocol does not carry it yet).
+    /// default; the protocol carries it since v4, so the instrument runs the host's τ).
     pub min_observability: f32,
     /// [`Termination::Confident`] stops only once the estimated probability that the
     /// belief argmax is wrong is below this ([`DEFAULT_STOP_RISK`] by default; the

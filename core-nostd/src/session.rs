@@ -320,6 +320,10 @@ impl Controller {
         if p.rot_bins == 0 || p.rot_bins > MAX_ROT_BINS {
             return bad(ParamError::RotBins);
         }
+        // The stop rule's settings (v4): stop_risk in (0, 1], min_observability in [0, 1].
+        if let Err(e) = p.check_stop_rule() {
+            return bad(e);
+        }
         match p.agent {
             // The float network and the greedy benchmarks live on the host only.
             AgentKind::Learnt | AgentKind::Oigm | AgentKind::OigmCost | AgentKind::Eem => {
@@ -354,6 +358,8 @@ impl Controller {
         let config = EpisodeConfig {
             steps_per_turn: p.steps_per_turn,
             max_actions: p.max_actions,
+            min_observability: p.min_observability,
+            stop_risk: p.stop_risk,
             ..EpisodeConfig::default()
         };
         let pp = PipelineParams {
@@ -362,9 +368,10 @@ impl Controller {
             ground_truth: p.ground_truth,
             termination: p.termination,
             registration_seed: registration_seed(p.seed),
-            // Not on the wire yet (protocol v3): the instrument stops as before.
-            min_observability: 0.0,
-            stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
+            // The host's stop rule, carried since protocol v4 (validated in check_params):
+            // the instrument stops exactly where the host's episode runner would.
+            min_observability: p.min_observability,
+            stop_risk: p.stop_risk,
         };
         self.running = None;
         // An episode takes the localizer's memory back from a staged upload.
@@ -1055,6 +1062,8 @@ mod tests {
             ground_truth: Some(Pose2::new(0.5, 0.2, 0.3)),
             initial_scan: 0,
             termination: Termination::ActionLimit,
+            stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
+            min_observability: 0.0,
         }
     }
 
@@ -1315,6 +1324,61 @@ mod tests {
                 action: Action::RotateLeft
             }
         );
+    }
+
+    #[test]
+    fn stop_rule_params_are_validated_and_carried() {
+        let mut s = Session::new(CFG);
+        call(
+            &mut s,
+            1,
+            &Request::Hello {
+                protocol: PROTOCOL_VERSION,
+            },
+        );
+        call(&mut s, 2, &Request::LoadPlan { vertices: square() });
+        let mut id = 3;
+        for risk in [f32::NAN, 0.0, 1.5, -0.5, f32::INFINITY] {
+            let mut p = params(5);
+            p.termination = Termination::Confident;
+            p.stop_risk = risk;
+            assert_eq!(
+                call(&mut s, id, &Request::StartEpisode(p)),
+                Response::Error(WireError::InvalidParams(ParamError::InvalidStopRisk)),
+                "stop_risk {risk}"
+            );
+            id += 1;
+        }
+        for tau in [-1.0, f32::NAN, 1.5, f32::NEG_INFINITY] {
+            let mut p = params(5);
+            p.min_observability = tau;
+            assert_eq!(
+                call(&mut s, id, &Request::StartEpisode(p)),
+                Response::Error(WireError::InvalidParams(ParamError::InvalidObservability)),
+                "min_observability {tau}"
+            );
+            id += 1;
+        }
+        assert_eq!(s.phase(), Phase::Ready);
+        assert!(!s.controller().is_running());
+        // The device keeps serving: a valid Start runs, with the host's stop rule.
+        let mut p = params(5);
+        p.termination = Termination::Confident;
+        p.stop_risk = 0.05;
+        p.min_observability = 0.2;
+        assert!(matches!(
+            call(&mut s, id, &Request::StartEpisode(p)),
+            Response::Act { step: 0, .. }
+        ));
+        let config = s.controller().runner.state().config;
+        assert_eq!(config.stop_risk, 0.05);
+        assert_eq!(config.min_observability, 0.2);
+        // The edges of the valid ranges are accepted.
+        p.stop_risk = 1.0;
+        p.min_observability = 1.0;
+        assert!(s.controller().check_params(&p).is_ok());
+        p.min_observability = 0.0;
+        assert!(s.controller().check_params(&p).is_ok());
     }
 
     #[test]

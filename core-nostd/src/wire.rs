@@ -25,7 +25,7 @@ use heapless::{String as HString, Vec as HVec};
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 /// Protocol version; bumped on every incompatible change of a message or of the framing.
-pub const PROTOCOL_VERSION: u16 = 3;
+pub const PROTOCOL_VERSION: u16 = 4;
 /// The id carried by device replies to frames whose own id could not be read.
 pub const NO_ID: u16 = 0;
 /// Largest CRC-protected payload (postcard bytes + 4 CRC bytes).
@@ -248,6 +248,31 @@ pub struct EpisodeParams {
     pub initial_scan: u32,
     /// When the episode stops early ([`Termination::Oracle`] needs `ground_truth`).
     pub termination: Termination,
+    /// The confident stop's risk ([`crate::pipeline::PipelineParams::stop_risk`]):
+    /// [`Termination::Confident`] stops only once the estimated probability that the
+    /// registration is wrong is below this. Finite, 0 < P <= 1 (else
+    /// [`ParamError::InvalidStopRisk`]); the host's default is
+    /// [`crate::pipeline::DEFAULT_STOP_RISK`]. Since protocol v4.
+    pub stop_risk: f32,
+    /// The observability stop test ([`crate::pipeline::PipelineParams::min_observability`]):
+    /// stop only once the smallest eigenvalue of the readings' normalised information
+    /// matrix reaches this. Finite, 0 <= τ <= 1, 0 = off (else
+    /// [`ParamError::InvalidObservability`]). Since protocol v4.
+    pub min_observability: f32,
+}
+
+impl EpisodeParams {
+    /// The check of [`EpisodeParams::stop_risk`] and [`EpisodeParams::min_observability`]
+    /// (the device runs it in `Controller::check_params`; NaN and infinities are refused).
+    pub fn check_stop_rule(&self) -> Result<(), ParamError> {
+        if !(self.stop_risk.is_finite() && self.stop_risk > 0.0 && self.stop_risk <= 1.0) {
+            return Err(ParamError::InvalidStopRisk);
+        }
+        if !(self.min_observability.is_finite() && (0.0..=1.0).contains(&self.min_observability)) {
+            return Err(ParamError::InvalidObservability);
+        }
+        Ok(())
+    }
 }
 
 /// Static description of the device, sent in answer to `Hello`.
@@ -458,6 +483,10 @@ pub enum ParamError {
     /// The requested agent does not run on this device (the learnt policy, until the
     /// device carries one).
     AgentUnavailable,
+    /// `stop_risk` is NaN, infinite, not above 0 or above 1.
+    InvalidStopRisk,
+    /// `min_observability` is NaN, infinite, below 0 or above 1.
+    InvalidObservability,
 }
 
 /// Why an observation was rejected (the episode stays at the same step).
@@ -910,6 +939,76 @@ mod tests {
             v.push([i as f32, -(i as f32)]).unwrap();
         }
         roundtrip(&Request::LoadPlan { vertices: v });
+    }
+
+    fn episode_params() -> EpisodeParams {
+        EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 0x0123_4567_89AB_CDEF,
+            steps_per_turn: 54,
+            max_actions: 100,
+            rot_bins: 10,
+            known_heading: Some(0.25),
+            ground_truth: Some(Pose2::new(0.5, -0.25, 1.0)),
+            initial_scan: 0b1_0110,
+            termination: Termination::Confident,
+            stop_risk: 0.05,
+            min_observability: 0.125,
+        }
+    }
+
+    #[test]
+    fn episode_params_round_trip_with_stop_rule() {
+        let p = episode_params();
+        roundtrip(&Request::StartEpisode(p));
+        let mut off = p;
+        off.stop_risk = 1.0;
+        off.min_observability = 0.0;
+        roundtrip(&Request::StartEpisode(off));
+        // v4 layout: the two f32 close the message, stop_risk first, each 4 raw LE bytes.
+        let mut raw = [0u8; MAX_PAYLOAD];
+        let body = postcard::to_slice(&(42u16, Request::StartEpisode(p)), &mut raw).unwrap();
+        let n = body.len();
+        assert_eq!(&body[n - 8..n - 4], &0.05f32.to_le_bytes());
+        assert_eq!(&body[n - 4..], &0.125f32.to_le_bytes());
+        // A v3 StartEpisode (the same message without the two fields) no longer decodes.
+        let crc = crc32(&body[..n - 8]);
+        raw[n - 8..n - 4].copy_from_slice(&crc.to_le_bytes());
+        let mut v3 = [0u8; MAX_FRAME];
+        let m = cobs_encode(&raw[..n - 4], &mut v3).unwrap();
+        assert_eq!(
+            decode_frame_with_id::<Request>(&mut v3[..m]).unwrap_err(),
+            (FrameError::Decode, 42)
+        );
+    }
+
+    #[test]
+    fn stop_rule_validation() {
+        assert_eq!(episode_params().check_stop_rule(), Ok(()));
+        for risk in [f32::NAN, 0.0, -0.01, 1.5, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut p = episode_params();
+            p.stop_risk = risk;
+            assert_eq!(
+                p.check_stop_rule(),
+                Err(ParamError::InvalidStopRisk),
+                "{risk}"
+            );
+        }
+        for tau in [-1.0, f32::NAN, 1.01, f32::INFINITY, -0.0001] {
+            let mut p = episode_params();
+            p.min_observability = tau;
+            assert_eq!(
+                p.check_stop_rule(),
+                Err(ParamError::InvalidObservability),
+                "{tau}"
+            );
+        }
+        for (risk, tau) in [(1.0, 0.0), (f32::MIN_POSITIVE, 1.0), (0.01, 0.5)] {
+            let mut p = episode_params();
+            p.stop_risk = risk;
+            p.min_observability = tau;
+            assert_eq!(p.check_stop_rule(), Ok(()), "{risk} {tau}");
+        }
     }
 
     #[test]

@@ -92,6 +92,8 @@ pub fn sim_episode(spec: &EpisodeSpec) -> (FloorPlan, EpisodeParams, SimInstrume
         ground_truth: Some(truth),
         initial_scan,
         termination: spec.termination,
+        stop_risk: spec.config.stop_risk,
+        min_observability: spec.config.min_observability,
     };
     (plan, params, SimInstrument::new(world))
 }

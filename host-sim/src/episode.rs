@@ -415,6 +415,27 @@ pub fn parse_termination(s: &str) -> Result<Termination, String> {
     })
 }
 
+/// Parses `--min-observability τ`: a number from 0 (off) to 1, NaN refused.
+pub fn parse_observability(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "'{s}' is not an observability threshold (a number from 0 = off to 1; the eigenvalue of readings split evenly between two perpendicular walls is 0.5)"
+        )),
+    }
+}
+
+/// Parses `--stop-risk P`: a finite probability, 0 < P <= 1 (the range the protocol's
+/// `EpisodeParams::stop_risk` accepts).
+pub fn parse_stop_risk(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 && v <= 1.0 => Ok(v),
+        _ => Err(format!(
+            "'{s}' is not a stop risk (a probability P with 0 < P <= 1: the largest accepted chance that the registration is wrong, e.g. 0.01 for 1 %)"
+        )),
+    }
+}
+
 /// Command-line parser for `--agent` (shared by every subcommand).
 pub fn parse_agent(s: &str) -> Result<AgentKind, String> {
     AgentKind::from_name(s).ok_or_else(|| {

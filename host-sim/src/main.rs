@@ -3,7 +3,9 @@
 
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
-use activesense_sim::episode::{parse_agent, parse_termination, scan_string, EpisodeSpec};
+use activesense_sim::episode::{
+    parse_agent, parse_observability, parse_stop_risk, parse_termination, scan_string, EpisodeSpec,
+};
 use activesense_sim::learn::agent::{run_agent_episode, Policies};
 use activesense_sim::planfile::{self, PlanReadArgs};
 use activesense_sim::plans::{self, Family};
@@ -226,10 +228,15 @@ struct EvalArgs {
     #[arg(long)]
     extra_measurements: Option<usize>,
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
-    /// normalised information matrix at the belief argmax must reach this (0 = off, as on
-    /// the instrument; docs/EVALUATION.md, "Observability").
+    /// normalised information matrix at the belief argmax must reach this (0 = off; the
+    /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
     #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
     min_observability: f32,
+    /// With --termination confident: stop only once the estimated probability that the
+    /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
+    /// 'Calibrated stop'). The instrument applies the same rule.
+    #[arg(long, default_value_t = activesense_core::pipeline::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    stop_risk: f32,
 }
 
 #[derive(Clone)]
@@ -342,10 +349,15 @@ struct EpisodeArgs {
     #[command(flatten)]
     read: PlanReadArgs,
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
-    /// normalised information matrix at the belief argmax must reach this (0 = off, as on
-    /// the instrument; docs/EVALUATION.md, "Observability").
+    /// normalised information matrix at the belief argmax must reach this (0 = off; the
+    /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
     #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
     min_observability: f32,
+    /// With --termination confident: stop only once the estimated probability that the
+    /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
+    /// 'Calibrated stop'). The instrument applies the same rule.
+    #[arg(long, default_value_t = activesense_core::pipeline::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    stop_risk: f32,
     /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
     /// learnt, learnt-int8, or the greedy benchmarks oigm, oigm-cost, eem (docs/BENCHMARKS.md).
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
@@ -600,6 +612,7 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
             steps_per_turn: a.steps_per_turn,
             max_actions: a.max_actions,
             min_observability: a.min_observability,
+            stop_risk: a.stop_risk,
             ..Default::default()
         },
         sensor: a.sensor.model()?,
@@ -794,6 +807,7 @@ fn cmd_eval(a: EvalArgs) -> Result<()> {
         config: EpisodeConfig {
             max_actions: a.max_actions,
             min_observability: a.min_observability,
+            stop_risk: a.stop_risk,
             ..Default::default()
         },
         sensor: a.sensor.model()?,
@@ -952,15 +966,6 @@ struct TrainArgs {
     /// without the final-registration-error term).
     #[arg(long, default_value_t = 1.0)]
     registration_reward: f32,
-}
-
-fn parse_observability(s: &str) -> Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
-        _ => Err(format!(
-            "'{s}' is not an observability threshold (a number from 0 = off to 1; the eigenvalue of readings split evenly between two perpendicular walls is 0.5)"
-        )),
-    }
 }
 
 fn parse_inputs(s: &str) -> Result<activesense_sim::learn::agent::InputMask, String> {

@@ -9,7 +9,9 @@
 //! and fails unless actions, observations and report are bit-identical.
 
 use crate::device::{sim_episode, SimInstrument};
-use crate::episode::{parse_agent, parse_termination, EpisodeSpec};
+use crate::episode::{
+    parse_agent, parse_observability, parse_stop_risk, parse_termination, EpisodeSpec,
+};
 use crate::link::{self, EpisodeRun, Link, LinkSpec};
 use crate::plans::TEST_SEEDS;
 use crate::sensor::SensorModel;
@@ -48,6 +50,16 @@ pub struct RemoteEpisodeArgs {
     /// truth (oracle, the paper's rule), when its belief is confident, or at the action limit.
     #[arg(long, value_parser = parse_termination, default_value = "oracle")]
     pub termination: activesense_core::pipeline::Termination,
+    /// With --termination confident: stop only once the estimated probability that the
+    /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
+    /// 'Calibrated stop'). The instrument applies the same rule.
+    #[arg(long, default_value_t = activesense_core::pipeline::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    pub stop_risk: f32,
+    /// Stop only once the readings determine the pose: the smallest eigenvalue of their
+    /// normalised information matrix at the belief argmax must reach this (0 = off; sent
+    /// to the instrument, which applies it; docs/EVALUATION.md, "Observability").
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
+    pub min_observability: f32,
     /// Reply timeout in milliseconds.
     #[arg(long, default_value_t = 5000)]
     pub timeout_ms: u64,
@@ -147,6 +159,8 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
         config: EpisodeConfig {
             steps_per_turn: DEFAULT_STEPS_PER_TURN,
             max_actions: a.max_actions,
+            min_observability: a.min_observability,
+            stop_risk: a.stop_risk,
             ..Default::default()
         },
         sensor: SensorModel::default(),
@@ -463,6 +477,8 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                         ground_truth: Some(truth),
                         initial_scan,
                         termination: spec.termination,
+                        stop_risk: spec.config.stop_risk,
+                        min_observability: spec.config.min_observability,
                     };
                     (plan.clone(), params, SimInstrument::new(world))
                 };
@@ -605,6 +621,8 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
             max_actions: EVAL_MAX_ACTIONS,
             episode_seed: a.episode_seed,
             termination: a.termination,
+            stop_risk: activesense_core::pipeline::DEFAULT_STOP_RISK,
+            min_observability: 0.0,
             timeout_ms: a.timeout_ms,
             verify: false,
         };

@@ -200,3 +200,73 @@ fn observability_threshold_is_validated_and_used() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("ActionLimit after 40 actions"), "{out}");
 }
+
+#[test]
+fn stop_risk_is_validated_and_carried() {
+    // Refused with a plain message on every command that takes it (before any work).
+    let plan = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/plans/l-room.json"
+    );
+    for bad in ["nan", "0", "1.5", "-0.1", "inf"] {
+        for cmd in [
+            &["episode", "--seed", "1000000"][..],
+            &["eval", "--plans", "1", "--out", "/tmp/never"][..],
+            &["sim", "--link", "loopback", "--episodes", "1"][..],
+            &["serial", "run", "--port", "/dev/null", "--plan", plan][..],
+        ] {
+            let flag = format!("--stop-risk={bad}");
+            let mut args = cmd.to_vec();
+            args.push(&flag);
+            let o = activesense(&args);
+            assert!(!o.status.success(), "{args:?} accepted");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(err.contains("is not a stop risk"), "{args:?}: {err}");
+        }
+    }
+    for cmd in ["sim", "serial"] {
+        let mut args = vec![cmd];
+        if cmd == "serial" {
+            args.extend(["run", "--port", "/dev/null", "--plan", plan]);
+        }
+        args.extend(["--min-observability", "nan"]);
+        let o = activesense(&args);
+        assert!(!o.status.success(), "{args:?} accepted");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("observability threshold"));
+    }
+    // The episode records it in its spec.
+    let dir = scratch("stop-risk");
+    let json = dir.join("run.json");
+    let o = activesense(&[
+        "episode",
+        "--seed",
+        "1000000",
+        "--termination",
+        "confident",
+        "--stop-risk",
+        "0.05",
+        "--json",
+        s(&json),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(t["spec"]["config"]["stop_risk"].as_f64(), Some(0.05));
+    // The device is told both and plays the same episodes as the in-process run.
+    let o = activesense(&[
+        "sim",
+        "--link",
+        "loopback",
+        "--episodes",
+        "2",
+        "--termination",
+        "confident",
+        "--stop-risk",
+        "0.05",
+        "--min-observability",
+        "0.2",
+        "--verify",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("every episode verified bit-identical"));
+}

@@ -8,6 +8,7 @@
 use activesense_core::agents::{Action, AgentKind};
 use activesense_core::episode::Observation;
 use activesense_core::floorplan::PlanError;
+use activesense_core::pipeline::Termination;
 use activesense_core::wire::*;
 use activesense_sim::device::sim_episode;
 use activesense_sim::episode::{EndReason, EpisodeSpec};
@@ -38,9 +39,46 @@ pub fn spec(i: u32, rot_bins: u8) -> EpisodeSpec {
 /// in-process run ([`reference_run`]) and the lead's [`run_episode`]. Returns the number
 /// of steps exchanged.
 pub fn check_episodes<T: Read + Write>(client: &mut Client<T>, n: u32, rot_bins: u8) -> usize {
+    check_episodes_with(client, n, rot_bins, |_| {})
+}
+
+/// An `adjust` for [`check_episodes_with`]: the confident stop with the given stop rule
+/// (`stop_risk`, `min_observability`), which the host sends in `EpisodeParams` (protocol v4).
+pub fn confident_stop(stop_risk: f32, min_observability: f32) -> impl Fn(&mut EpisodeSpec) {
+    move |s| {
+        s.termination = Termination::Confident;
+        s.config.stop_risk = stop_risk;
+        s.config.min_observability = min_observability;
+    }
+}
+
+/// The host's own episode for `s` (baseline, or the int8 policy built into the firmware):
+/// its actions.
+pub fn host_actions(s: &EpisodeSpec) -> Vec<Action> {
+    let mut policies = Policies::default();
+    policies
+        .load_int8(&[], &[s.rot_bins])
+        .expect("built-in int8 policies");
+    run_agent_episode(s, &policies)
+        .expect("host episode")
+        .steps
+        .iter()
+        .map(|st| st.action)
+        .collect()
+}
+
+/// As [`check_episodes`], with `adjust` applied to each episode's [`spec`] (termination,
+/// stop rule): the device must take the host's actions and stop at the host's step.
+pub fn check_episodes_with<T: Read + Write>(
+    client: &mut Client<T>,
+    n: u32,
+    rot_bins: u8,
+    adjust: impl Fn(&mut EpisodeSpec),
+) -> usize {
     let mut steps = 0;
     for i in 0..n {
-        let s = spec(i, rot_bins);
+        let mut s = spec(i, rot_bins);
+        adjust(&mut s);
         let (plan, params, mut inst) = sim_episode(&s);
         client.load_plan(&plan).expect("load plan");
         let run = client.run_episode(&params, &mut inst).expect("episode");
@@ -221,6 +259,27 @@ pub fn fault_suite<T: Read + Write>(c: &mut Client<T>) {
         device_err(c.call(&Request::StartEpisode(p))),
         WireError::InvalidParams(ParamError::KnownHeadingRequired)
     );
+    // The stop rule (v4): stop_risk outside (0, 1] and min_observability outside [0, 1]
+    // (NaN included) are refused with typed errors; the device keeps serving.
+    for risk in [f32::NAN, 0.0, 1.5] {
+        let mut p = params;
+        p.termination = Termination::Confident;
+        p.stop_risk = risk;
+        assert_eq!(
+            device_err(c.call(&Request::StartEpisode(p))),
+            WireError::InvalidParams(ParamError::InvalidStopRisk),
+            "stop_risk {risk}"
+        );
+    }
+    for tau in [-1.0, f32::NAN] {
+        let mut p = params;
+        p.min_observability = tau;
+        assert_eq!(
+            device_err(c.call(&Request::StartEpisode(p))),
+            WireError::InvalidParams(ParamError::InvalidObservability),
+            "min_observability {tau}"
+        );
+    }
     let mut p = params;
     p.max_actions = 20;
     p.agent = AgentKind::Heuristic0; // step 0 is a measurement

@@ -5,7 +5,9 @@ use activesense_core::session::{Session, SessionConfig};
 use activesense_core::wire::Phase;
 use activesense_sim::device::{serve_std, Pipe, HOST_DEVICE};
 use activesense_sim::link::{self, Client, LinkSpec};
-use activesense_tests::{check_episodes, fault_suite, spec};
+use activesense_tests::{
+    check_episodes, check_episodes_with, confident_stop, fault_suite, host_actions, spec,
+};
 use std::time::Duration;
 
 #[test]
@@ -14,6 +16,36 @@ fn loopback_episodes_are_bit_identical_to_in_process_runs() {
     l.client.hello().unwrap();
     assert!(check_episodes(&mut l.client, 10, 1) > 0);
     assert!(check_episodes(&mut l.client, 10, 10) > 0);
+    l.close().unwrap();
+}
+
+/// The confident stop with a non-default stop rule (protocol v4 carries `stop_risk` and
+/// `min_observability`): the device takes the host's actions and stops at the host's step.
+#[test]
+fn loopback_confident_stop_rule_matches_host() {
+    const STOP_RISK: f32 = 0.05;
+    const MIN_OBSERVABILITY: f32 = 0.2;
+    const EPISODES: u32 = 4;
+    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    l.client.hello().unwrap();
+    let mut rule_matters = 0;
+    for rot_bins in [1, 10] {
+        let adjust = confident_stop(STOP_RISK, MIN_OBSERVABILITY);
+        assert!(check_episodes_with(&mut l.client, EPISODES, rot_bins, &adjust) > 0);
+        // The threshold changes where the host stops in some of these episodes, so the
+        // agreement above shows that the device was told it (and did not run τ = 0).
+        for i in 0..EPISODES {
+            let mut told = spec(i, rot_bins);
+            adjust(&mut told);
+            let mut plain = told.clone();
+            plain.config.min_observability = 0.0;
+            rule_matters += usize::from(host_actions(&told) != host_actions(&plain));
+        }
+    }
+    assert!(
+        rule_matters > 0,
+        "τ = {MIN_OBSERVABILITY} changed no episode"
+    );
     l.close().unwrap();
 }
 

@@ -3,7 +3,9 @@
 //! `firmware` profile) unless `ACTIVESENSE_FIRMWARE_ELF` names one.
 
 use activesense_sim::link::{self, LinkSpec};
-use activesense_tests::{check_episodes, fault_suite, firmware_elf};
+use activesense_tests::{
+    check_episodes, check_episodes_with, confident_stop, fault_suite, firmware_elf,
+};
 use std::time::Duration;
 
 #[test]
@@ -15,6 +17,9 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
     // 20 episodes: 10 with the heading known (K = 1), 10 with K = 10.
     assert!(check_episodes(&mut l.client, 10, 1) > 0);
     assert!(check_episodes(&mut l.client, 10, 10) > 0);
+    // The confident stop with the host's stop rule (protocol v4): stop_risk 0.05 and an
+    // observability threshold, the same actions and stop step on the firmware as on the host.
+    assert!(check_episodes_with(&mut l.client, 2, 10, confident_stop(0.05, 0.2)) > 0);
     fault_suite(&mut l.client);
     check_episodes(&mut l.client, 1, 10);
     // A policy uploaded into the firmware's RAM slot serves bit-identically; bad uploads
