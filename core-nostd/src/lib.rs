@@ -48,6 +48,8 @@ pub mod refine;
 pub mod registration;
 pub mod runner;
 pub mod session;
+pub mod stop;
+pub mod stop_calibration;
 pub mod symmetry;
 pub mod wire;
 

@@ -11,24 +11,27 @@
 //! - **Termination** (§3.1): never before the registration is determined
 //!   ([`Pipeline::min_measurements`]); then [`Termination::Oracle`] stops on coarse success
 //!   against a supplied ground truth (the paper's rule, simulation only); [`Termination::Confident`]
-//!   stops when the belief is confident (no ground truth); [`Termination::ActionLimit`]
-//!   never stops early.
-//! - **Refinement** (§3.3): annealed sparse ICP ([`registration::register_multistart`])
-//!   from the belief argmax, kept inside the region the coarse estimate vouches for
-//!   ([`TRUST_CELLS`], 1.5 rotation bins), with a deterministic heading sweep when the
-//!   heading is unknown ([`REGISTRATION_STARTS`]).
+//!   stops when the calibrated estimate of the probability that the registration is wrong
+//!   is below [`PipelineParams::stop_risk`] ([`crate::stop`]; no ground truth);
+//!   [`Termination::ActionLimit`] never stops early.
+//! - **Refinement** (§3.3): the multi-hypothesis refinement ([`crate::refine`]): annealed
+//!   sparse ICP ([`registration::register_multistart`]) from the belief argmax, kept inside
+//!   the region the coarse estimate vouches for ([`TRUST_CELLS`], 1.5 rotation bins), with a
+//!   deterministic heading sweep when the heading is unknown ([`REGISTRATION_STARTS`]), over
+//!   leave-one/two-out reading sets scored by range likelihood and belief mass.
 //!
 //! Memory: the localizer dominates (≈ 46 KiB for 30×30×10); [`Pipeline::new_empty`] is a
 //! `const fn` so the firmware keeps it in a `static`.
 
 use crate::floorplan::FloorPlan;
 use crate::geometry::Pose2;
-use crate::localization::{Confidence, GhtLocalizer, LocError, LocalizerConfig};
+use crate::localization::{GhtLocalizer, LocError, LocalizerConfig};
 use crate::refine::{self, RefineInput, Refinement};
 use crate::registration::{
     self, AnnealParams, Measurement, Observability, Observations, RangeModel, Registration,
     RegistrationError,
 };
+use crate::stop::{self, StopFeatures, StopModel};
 use crate::symmetry::{symmetry_order, SymmetryTolerance};
 use serde::{Deserialize, Serialize};
 
@@ -37,7 +40,8 @@ use serde::{Deserialize, Serialize};
 pub enum Termination {
     /// On coarse success against the ground truth (the paper's rule; simulation only).
     Oracle,
-    /// When the belief is confident ([`Confidence::default`]); no ground truth used.
+    /// When the calibrated estimate of P(wrong registration) is below
+    /// [`PipelineParams::stop_risk`] ([`crate::stop`]); no ground truth used.
     Confident,
     /// Never: run to the action limit.
     ActionLimit,
@@ -262,11 +266,64 @@ impl Pipeline {
                 .filter(|t| self.localizer.coarse_success(t, self.order))
                 .map(|_| Stop::CoarseSuccess),
             Termination::Confident => self
-                .localizer
-                .is_confident(&Confidence::default(), self.order)
-                .then_some(Stop::Confident),
+                .stop_risk_estimate()
+                .filter(|&risk| risk < self.params.stop_risk)
+                .map(|_| Stop::Confident),
             Termination::ActionLimit => None,
         }
+    }
+
+    /// What the calibrated stop looks at ([`crate::stop`]); `None` before the belief's peak
+    /// mass reaches [`stop::GATE_PEAK_MASS`], before [`Pipeline::min_measurements`], or when
+    /// the readings do not register.
+    pub fn stop_features(&self) -> Option<StopFeatures> {
+        if !self.voted || self.observations.len() < self.min_measurements() {
+            return None;
+        }
+        let peak_mass = self.localizer.peak_mass(self.order);
+        if peak_mass < stop::GATE_PEAK_MASS {
+            return None;
+        }
+        let refined = self.refine(&self.plan).ok()?;
+        let grid = self.localizer.grid();
+        let argmax = self.localizer.argmax()?;
+        let coarse = grid.pose_of(argmax);
+        let pose = refined.registration.pose;
+        let offset_cells = ((pose.x - coarse.x) / grid.cell[0])
+            .abs()
+            .max(((pose.y - coarse.y) / grid.cell[1]).abs());
+        let offset_bins = if self.params.rot_bins <= 1 {
+            0.0
+        } else {
+            crate::math::abs(crate::math::wrap_angle(pose.theta - coarse.theta)) / grid.bin_width()
+        };
+        Some(StopFeatures {
+            peak_mass,
+            entropy: self.localizer.entropy(),
+            readings: self.observations.len() as u16,
+            explained: refined.fit.explained,
+            unknowns: self.min_measurements() as u8,
+            observability: self.observability().map_or(0.0, |o| o.min_eigenvalue),
+            offset_cells,
+            offset_bins,
+            edge_margin: {
+                let lo = grid.cell_centre(argmax.ix as usize, argmax.iy as usize);
+                let (hx, hy) = (0.5 * grid.cell[0], 0.5 * grid.cell[1]);
+                (hx - crate::math::abs(pose.x - lo.x)).min(hy - crate::math::abs(pose.y - lo.y))
+            },
+            agrees: grid.cell_of_pose(&pose).is_some_and(|c| {
+                c.ix == argmax.ix && c.iy == argmax.iy && grid.bin_distance(c.bin, argmax.bin) <= 1
+            }),
+        })
+    }
+
+    /// The calibrated estimate of the probability that the belief argmax is wrong
+    /// ([`StopModel::for_rot_bins`] on [`Pipeline::stop_features`]); `None` when there are
+    /// no features yet or the refined pose does not agree with the argmax
+    /// ([`StopFeatures::agrees`]: then the episode does not stop).
+    pub fn stop_risk_estimate(&self) -> Option<f32> {
+        let f = self.stop_features().filter(|f| f.agrees)?;
+        Some(StopModel::for_rot_bins(self.params.rot_bins).risk(&f))
     }
 
     /// Fewest measurements before the episode may stop: as many as the registration has
@@ -500,5 +557,59 @@ pub(crate) mod tests {
         assert_eq!(p.should_stop(), Some(Stop::CoarseSuccess));
         p.params.min_observability = 2.0 * o.min_eigenvalue;
         assert_eq!(p.should_stop(), None);
+    }
+
+    /// The calibrated stop on noise-free readings: it stops by itself, on a pose that
+    /// agrees with the argmax and is right, and the risk setting moves the stop.
+    #[test]
+    fn confident_stop_follows_the_stop_risk() {
+        let plan = l_room();
+        let truth = Pose2::new(0.9, -0.4, 2.0);
+        let params = PipelineParams {
+            rot_bins: 10,
+            known_heading: None,
+            ground_truth: Some(truth),
+            termination: Termination::Confident,
+            registration_seed: 5,
+            min_observability: 0.0,
+            stop_risk: DEFAULT_STOP_RISK,
+        };
+        let mut p = Pipeline::new_empty();
+        p.start(&plan, &params).unwrap();
+        let mut stopped = false;
+        for k in 0..40 {
+            let bearing = k as f32 * 0.77;
+            let hit = plan
+                .ray_cast(truth.translation(), unit(truth.theta + bearing))
+                .unwrap();
+            assert!(p.measure(bearing, hit.range));
+            if p.should_stop() == Some(Stop::Confident) {
+                stopped = true;
+                break;
+            }
+        }
+        assert!(
+            stopped,
+            "noise-free readings reach a 1 % risk within 40 ranges"
+        );
+        let f = p.stop_features().expect("stopped on features");
+        assert!(
+            f.agrees && f.explained as usize == p.observations().len(),
+            "{f:?}"
+        );
+        let risk = p.stop_risk_estimate().expect("features agree");
+        assert!(risk < DEFAULT_STOP_RISK);
+        let r = p.finish(&plan);
+        assert_eq!(r.recognised, Some(true));
+        let best = r.best().unwrap();
+        assert!(
+            (best.translation() - truth.translation()).norm() < 0.02,
+            "{best:?}"
+        );
+        // The same readings do not stop under a risk below the estimate.
+        p.params.stop_risk = 0.5 * risk;
+        assert_eq!(p.should_stop(), None);
+        p.params.stop_risk = risk * 1.01;
+        assert_eq!(p.should_stop(), Some(Stop::Confident));
     }
 }

@@ -131,6 +131,13 @@ pub struct EpisodeRow {
     /// the argmax and its symmetric equivalents (0 without a vote).
     #[serde(default)]
     pub final_peak_mass: f32,
+    /// The termination rule ended the episode (not the action limit).
+    #[serde(default)]
+    pub stopped_by_rule: bool,
+    /// With `--termination confident`: the calibrated estimate of P(wrong) the episode
+    /// stopped on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub risk_at_stop: Option<f32>,
 }
 
 impl EpisodeRow {
@@ -146,6 +153,8 @@ impl EpisodeRow {
             coarse_error: t.outcome.coarse_error,
             symmetry_order: t.outcome.symmetry_order,
             final_peak_mass: 0.0,
+            stopped_by_rule: t.end != crate::episode::EndReason::ActionLimit,
+            risk_at_stop: None,
             repeated_bearings: {
                 let mut seen = std::collections::BTreeSet::new();
                 t.steps
@@ -272,6 +281,19 @@ pub struct GroupResult {
     pub reliability: Reliability,
     /// Per-episode rows, in plan order.
     pub episodes: Vec<EpisodeRow>,
+    /// Episodes the termination rule ended (the rest ran to the action limit).
+    #[serde(default)]
+    pub stops: u32,
+    /// Of those, the ones whose belief argmax was not a coarse success.
+    #[serde(default)]
+    pub wrong_stops: u32,
+    /// Mean calibrated risk estimate at the confident stops.
+    #[serde(default)]
+    pub mean_risk_at_stop: Option<f64>,
+    /// Episodes whose final pose is within [`REGISTERED_TOLERANCE`] of the truth (symmetry-
+    /// aware), recognised or not: what the surveyor gets.
+    #[serde(default)]
+    pub registered: f64,
 }
 
 /// Largest measurement budget plotted.
@@ -307,6 +329,8 @@ struct CurveRecorder {
     samples: Vec<(f32, f32, bool, Option<f32>)>,
     /// The belief's peak mass (its stated confidence) after the last vote.
     peak_mass: f32,
+    /// The calibrated risk estimate when the confident rule stopped the episode.
+    risk_at_stop: Option<f32>,
 }
 
 impl CurveRecorder {
@@ -319,6 +343,9 @@ impl CurveRecorder {
             Some(st) => (st.cost, st.coarse_success),
         };
         let measured = v.step.is_some_and(|st| st.range.is_some());
+        if v.runner.stop() == Some(activesense_core::pipeline::Stop::Confident) {
+            self.risk_at_stop = pipe.stop_risk_estimate();
+        }
         if measured {
             // The belief changes only when a range is voted.
             self.peak_mass = loc.peak_mass(pipe.symmetry_order());
@@ -352,6 +379,9 @@ impl CurveRecorder {
         c
     }
 }
+
+/// Pose error (m) up to which an episode counts as registered in the confident-stop table.
+pub const REGISTERED_TOLERANCE: f32 = 0.05;
 
 /// Bins of the reliability diagram: stated confidence `[i/10, (i+1)/10)` (the last bin
 /// includes 1).
@@ -573,6 +603,23 @@ fn aggregate(
         pose_error_by_budget: budget_err,
         curve: curve_of(curves, curve_plans.min(n)),
         reliability: Reliability::of(&rows),
+        stops: rows.iter().filter(|r| r.stopped_by_rule).count() as u32,
+        wrong_stops: rows
+            .iter()
+            .filter(|r| r.stopped_by_rule && !r.recognised)
+            .count() as u32,
+        mean_risk_at_stop: MeanCi::of(
+            &rows
+                .iter()
+                .filter_map(|r| r.risk_at_stop.map(f64::from))
+                .collect::<Vec<_>>(),
+        )
+        .map(|m| m.mean),
+        registered: rows
+            .iter()
+            .filter(|r| r.pose_error.is_some_and(|e| e <= REGISTERED_TOLERANCE))
+            .count() as f64
+            / n.max(1) as f64,
         episodes: rows,
     }
 }
@@ -651,6 +698,7 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
                 register: i < opts.curve_plans,
                 samples: Vec::new(),
                 peak_mass: 0.0,
+                risk_at_stop: None,
             };
             // The policies were loaded for every evaluated setting before the run.
             let (traj, decided) =
@@ -658,6 +706,7 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
                     .expect("policy loaded for every K");
             let mut row = EpisodeRow::of(&traj);
             row.final_peak_mass = rec.peak_mass;
+            row.risk_at_stop = rec.risk_at_stop;
             bar.inc(1);
             (
                 g,
@@ -833,6 +882,9 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         let _ = writeln!(s);
         perf_table(&mut s, report, k);
         reliability_table(&mut s, report, k);
+        if o.termination == Termination::Confident {
+            stop_table(&mut s, report, k);
+        }
     }
     let _ = writeln!(s, "## Side by side with the paper's Table 4\n");
     let _ = writeln!(
@@ -926,6 +978,37 @@ fn perf_table(s: &mut String, report: &EvalReport, k: u8) {
             let _ = write!(line, " {:.3} |", r.recognition_rate + b * r.cost);
         }
         let _ = writeln!(s, "{line}");
+    }
+    let _ = writeln!(s);
+}
+
+/// The calibrated stop's record per agent (`--termination confident`).
+fn stop_table(s: &mut String, report: &EvalReport, k: u8) {
+    let _ = writeln!(
+        s,
+        "Calibrated stop (`--stop-risk {}`): how many episodes the rule stopped, how many of those stops were wrong \
+         (argmax not a coarse success), the mean estimated risk at the stops (what the rule claimed), and the episodes \
+         whose final pose is within {} cm of the truth, recognised or not.\n",
+        report.options.config.stop_risk,
+        100.0 * REGISTERED_TOLERANCE
+    );
+    let _ = writeln!(
+        s,
+        "| agent | stopped by the rule | wrong stops (of stops) | mean estimated risk at stop | recognition | pose within {} cm |\n|---|---|---|---|---|---|",
+        100.0 * REGISTERED_TOLERANCE
+    );
+    for r in report.results.iter().filter(|r| r.rot_bins == k) {
+        let _ = writeln!(
+            s,
+            "| {} | {:.3} | {} ({:.4}) | {} | {:.3} | {:.3} |",
+            r.agent,
+            r.stops as f64 / r.plans.max(1) as f64,
+            r.wrong_stops,
+            r.wrong_stops as f64 / r.stops.max(1) as f64,
+            opt(r.mean_risk_at_stop, 4),
+            r.recognition_rate,
+            r.registered
+        );
     }
     let _ = writeln!(s);
 }

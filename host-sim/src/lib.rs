@@ -9,10 +9,11 @@
 //! inspection tool: trajectory pages and the guided-back-propagation analysis ([`inspect`]).
 //! [`link`], [`device`] and [`remote`] talk the instrument serial protocol
 //! (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a
-//! thread. [`planfile`] reads the user's own floor plans (JSON, GeoJSON, DXF). The `activesense` binary (`src/main.rs`) is the command-line front end.
+//! thread. [`planfile`] reads the user's own floor plans (JSON, GeoJSON, DXF). [`calibrate`] fits the calibrated stop. The `activesense` binary (`src/main.rs`) is the command-line front end.
 
 pub mod bench_localization;
 pub mod bench_registration;
+pub mod calibrate;
 pub mod classical;
 pub mod device;
 pub mod episode;

@@ -64,6 +64,11 @@ enum Command {
     /// learnt-agent trajectory (episode --agent learnt --json FILE) with a guided
     /// back-propagation overlay, or (--aggregate) the Fig.-4 analysis over many episodes.
     Inspect(activesense_sim::inspect::InspectArgs),
+    /// Fit the calibrated stop (--termination confident, --stop-risk): run episodes on
+    /// calibration plans, fit P(wrong registration) from the belief and the readings, and
+    /// write the models the core compiles (core-nostd/src/stop_calibration.rs) with a
+    /// held-out check (results/calibration/).
+    Calibrate(activesense_sim::calibrate::CalibrateArgs),
 }
 
 #[derive(Subcommand)]
@@ -405,6 +410,7 @@ fn main() -> ExitCode {
         Command::Train(a) => cmd_train(a),
         Command::Dataset(a) => cmd_dataset(a),
         Command::Eval(a) => cmd_eval(a),
+        Command::Calibrate(a) => activesense_sim::calibrate::cmd_calibrate(a),
         Command::BenchRegistration(a) => cmd_bench_registration(a),
         Command::BenchLocalization(a) => cmd_bench_localization(a),
         Command::Sim(a) => activesense_sim::remote::cmd_sim(a),

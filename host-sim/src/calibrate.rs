@@ -1,0 +1,465 @@
+//! `activesense calibrate`: fits the calibrated stop's models ([`activesense_core::stop`]).
+//!
+//! Episodes of several agents run on calibration plans (generated seeds from
+//! `--first-seed`, far from the test set) to the action limit. After every returned range
+//! whose belief passes the stop gate, the pipeline's [`StopFeatures`] are recorded with the
+//! label "the belief argmax is wrong" (recorded only where the refined pose agrees with the argmax: the stop considers no other point) (not a coarse success against the truth). A logistic
+//! regression per rotation setting (Newton–Raphson / IRLS in f64 with a small ridge) is
+//! fitted on the even-indexed plans and checked on the odd-indexed ones: the reliability
+//! of its estimate at every step, and what the stop rule "stop at the first step whose
+//! estimated risk is below P" would have done there. The models are written as Rust
+//! source (`core-nostd/src/stop_calibration.rs`, compiled into the host and the firmware
+//! alike) and the report as `calibration.md` / `calibration.json`.
+
+use crate::episode::{parse_agent, Termination};
+use crate::eval::{episode_bar, EvalOptions};
+use crate::learn::agent::{run_agent_episode_observed, Policies};
+use activesense_core::agents::AgentKind;
+use activesense_core::episode::EpisodeConfig;
+use activesense_core::stop::{StopFeatures, StopModel, FEATURES};
+use clap::Args;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// `activesense calibrate` arguments.
+#[derive(Args, Debug)]
+pub struct CalibrateArgs {
+    /// Agents whose episodes provide the samples (comma-separated; the learnt agent uses the
+    /// committed policies).
+    #[arg(long, default_value = "heuristic-1,learnt,blind-0,heuristic-0")]
+    pub agents: String,
+    /// Rotation settings to fit (one model each).
+    #[arg(long, default_value = "1,10")]
+    pub rot_bins: String,
+    /// Calibration plans per agent and setting (even-indexed ones fit, odd-indexed ones check).
+    #[arg(long, default_value_t = 1000)]
+    pub plans: u32,
+    /// First calibration plan seed (training range; the test set starts at 1000000).
+    #[arg(long, default_value_t = 500_000)]
+    pub first_seed: u32,
+    /// Episode seed.
+    #[arg(long, default_value_t = 0)]
+    pub episode_seed: u64,
+    /// Action limit of the calibration episodes.
+    #[arg(long, default_value_t = 100)]
+    pub max_actions: u16,
+    /// Ridge (L2) penalty on the weights.
+    #[arg(long, default_value_t = 1e-3)]
+    pub ridge: f64,
+    /// Where to write the fitted models as Rust source (the file the core compiles).
+    #[arg(long, default_value = "core-nostd/src/stop_calibration.rs")]
+    pub rust_out: PathBuf,
+    /// Directory of the report (calibration.md, calibration.json).
+    #[arg(long, default_value = "results/calibration")]
+    pub out: PathBuf,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Also write every decision point (features, label) as JSON lines to this file.
+    #[arg(long)]
+    pub samples_out: Option<PathBuf>,
+    /// Do not draw a progress bar.
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+/// One recorded decision point.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct Sample {
+    /// Plan index within the calibration set.
+    pub plan: u32,
+    /// What the stop rule sees.
+    pub features: StopFeatures,
+    /// The belief argmax is not a coarse success.
+    pub wrong: bool,
+}
+
+/// The samples of one episode, in step order.
+type EpisodeSamples = Vec<Sample>;
+
+/// Runs the calibration episodes of one setting; one sample list per episode.
+pub fn collect(opts: &EvalOptions, rot_bins: u8, progress: bool) -> Vec<EpisodeSamples> {
+    let jobs: Vec<(AgentKind, u32)> = opts
+        .agents
+        .iter()
+        .flat_map(|&a| (0..opts.plans).map(move |i| (a, i)))
+        .collect();
+    let bar = episode_bar(jobs.len() as u64, progress);
+    let out = jobs
+        .par_iter()
+        .map(|&(agent, i)| {
+            let spec = opts.spec(agent, rot_bins, i, Termination::ActionLimit);
+            let mut samples = Vec::new();
+            run_agent_episode_observed(&spec, &opts.policies, &mut |v| {
+                let Some(step) = v.step else { return };
+                if step.range.is_none() {
+                    return;
+                }
+                let pipe = v.runner.pipeline();
+                if let Some(features) = pipe.stop_features().filter(|f| f.agrees) {
+                    samples.push(Sample {
+                        plan: i,
+                        features,
+                        wrong: !step.coarse_success,
+                    });
+                }
+            })
+            .expect("policy loaded for every K");
+            bar.inc(1);
+            samples
+        })
+        .collect();
+    bar.finish_and_clear();
+    out
+}
+
+/// Logistic regression `P(y) = σ(w·x + b)` by Newton–Raphson with an L2 penalty `ridge`
+/// on `w`; returns `(w, b)`.
+pub fn fit_logistic(xs: &[[f64; FEATURES]], ys: &[bool], ridge: f64) -> ([f64; FEATURES], f64) {
+    const D: usize = FEATURES + 1;
+    let mut beta = [0.0f64; D];
+    // Start the bias at the base rate.
+    let p0 = (ys.iter().filter(|&&y| y).count() as f64 + 0.5) / (ys.len() as f64 + 1.0);
+    beta[FEATURES] = (p0 / (1.0 - p0)).ln();
+    for _ in 0..50 {
+        let mut grad = [0.0f64; D];
+        let mut hess = [[0.0f64; D]; D];
+        for (x, &y) in xs.iter().zip(ys) {
+            let mut z = beta[FEATURES];
+            for k in 0..FEATURES {
+                z += beta[k] * x[k];
+            }
+            let p = 1.0 / (1.0 + (-z).exp());
+            let r = p - y as u8 as f64;
+            let w = (p * (1.0 - p)).max(1e-12);
+            let xe: [f64; D] = std::array::from_fn(|k| if k < FEATURES { x[k] } else { 1.0 });
+            for a in 0..D {
+                grad[a] += r * xe[a];
+                for b in 0..D {
+                    hess[a][b] += w * xe[a] * xe[b];
+                }
+            }
+        }
+        for a in 0..FEATURES {
+            grad[a] += ridge * beta[a];
+            hess[a][a] += ridge;
+        }
+        let Some(step) = solve(hess, grad) else { break };
+        let mut change = 0.0f64;
+        for a in 0..D {
+            beta[a] -= step[a];
+            change = change.max(step[a].abs());
+        }
+        if change < 1e-9 {
+            break;
+        }
+    }
+    (std::array::from_fn(|k| beta[k]), beta[FEATURES])
+}
+
+/// Gaussian elimination with partial pivoting; `None` for a singular system.
+fn solve<const D: usize>(mut a: [[f64; D]; D], mut b: [f64; D]) -> Option<[f64; D]> {
+    for c in 0..D {
+        let p = (c..D).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        if a[p][c].abs() < 1e-12 {
+            return None;
+        }
+        a.swap(c, p);
+        b.swap(c, p);
+        let (pivot_rows, rest) = a.split_at_mut(c + 1);
+        let pivot = &pivot_rows[c];
+        for (r, row) in rest.iter_mut().enumerate() {
+            let f = row[c] / pivot[c];
+            for (x, p) in row[c..].iter_mut().zip(&pivot[c..]) {
+                *x -= f * p;
+            }
+            b[c + 1 + r] -= f * b[c];
+        }
+    }
+    let mut x = [0.0f64; D];
+    for r in (0..D).rev() {
+        let s: f64 = (r + 1..D).map(|k| a[r][k] * x[k]).sum();
+        x[r] = (b[r] - s) / a[r][r];
+    }
+    Some(x)
+}
+
+/// The check of a fitted model on held-out episodes.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct HeldOut {
+    /// Decision points.
+    pub samples: usize,
+    /// Fraction of them with a wrong argmax.
+    pub wrong_rate: f64,
+    /// Reliability per bin of the estimated risk `[0, .005, .01, .02, .05, .1, .2, .5, 1]`:
+    /// (samples, mean estimated risk, observed wrong rate).
+    pub reliability: Vec<(usize, f64, f64)>,
+    /// For each stop risk P in [`STOP_RISKS`]: (episodes that stopped, fraction of those
+    /// that stopped wrongly).
+    pub first_crossing: Vec<(f64, usize, f64)>,
+    /// Held-out episodes.
+    pub episodes: usize,
+}
+
+/// The stop risks the held-out check applies.
+pub const STOP_RISKS: [f64; 4] = [0.005, 0.01, 0.02, 0.05];
+const RISK_BINS: [f64; 9] = [0.0, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0001];
+
+fn held_out(model: &StopModel, episodes: &[&EpisodeSamples]) -> HeldOut {
+    let mut bins = vec![(0usize, 0.0f64, 0usize); RISK_BINS.len() - 1];
+    let mut n = 0;
+    let mut wrong = 0;
+    for s in episodes.iter().flat_map(|e| e.iter()) {
+        let r = model.risk(&s.features) as f64;
+        let b = RISK_BINS
+            .windows(2)
+            .position(|w| r >= w[0] && r < w[1])
+            .unwrap_or(0);
+        bins[b].0 += 1;
+        bins[b].1 += r;
+        bins[b].2 += s.wrong as usize;
+        n += 1;
+        wrong += s.wrong as usize;
+    }
+    let first_crossing = STOP_RISKS
+        .iter()
+        .map(|&p| {
+            let stops: Vec<bool> = episodes
+                .iter()
+                .filter_map(|e| e.iter().find(|s| (model.risk(&s.features) as f64) < p))
+                .map(|s| s.wrong)
+                .collect();
+            let bad = stops.iter().filter(|&&w| w).count();
+            (p, stops.len(), bad as f64 / stops.len().max(1) as f64)
+        })
+        .collect();
+    HeldOut {
+        samples: n,
+        wrong_rate: wrong as f64 / n.max(1) as f64,
+        reliability: bins
+            .iter()
+            .map(|&(k, sum, w)| (k, sum / k.max(1) as f64, w as f64 / k.max(1) as f64))
+            .collect(),
+        first_crossing,
+        episodes: episodes.len(),
+    }
+}
+
+/// One fitted setting.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Fitted {
+    /// The model.
+    pub model: StopModel,
+    /// Decision points it was fitted on.
+    pub fit_samples: usize,
+    /// The held-out check.
+    pub held_out: HeldOut,
+}
+
+/// The Rust source of `stop_calibration.rs`.
+pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
+    let mut s = String::new();
+    s.push_str("//! The calibrated stop's models ([`crate::stop::StopModel`]), one per rotation setting.\n");
+    s.push_str("//!\n//! Generated by `");
+    s.push_str(command);
+    s.push_str("`; do not edit by hand\n");
+    s.push_str("//! (the held-out check is in `results/calibration/calibration.md`).\n\n");
+    s.push_str("use crate::stop::StopModel;\n\n");
+    s.push_str("/// One model per fitted rotation setting.\npub const MODELS: &[StopModel] = &[\n");
+    for f in fitted {
+        let w: Vec<String> = f.model.weights.iter().map(|w| format!("{w:?}")).collect();
+        s.push_str(&format!(
+            "    // {} decision points.\n    StopModel {{\n        rot_bins: {},\n        weights: [{}],\n        bias: {:?},\n    }},\n",
+            f.fit_samples,
+            f.model.rot_bins,
+            w.join(", "),
+            f.model.bias
+        ));
+    }
+    s.push_str("];\n");
+    s
+}
+
+/// `calibration.md`.
+pub fn markdown(fitted: &[Fitted], command: &str) -> String {
+    let mut s = String::from("# Calibrated stop: fit and held-out check\n\n");
+    s.push_str(&format!("Produced by `{command}`.\n\n"));
+    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the argmax cell's edge, fraction of readings unexplained (`core-nostd/src/stop.rs`).\n\n");
+    for f in fitted {
+        let h = &f.held_out;
+        s.push_str(&format!(
+            "## K = {}\n\nFitted on {} decision points; weights {:?}, bias {:.3}.\n\nHeld-out: {} decision points in {} episodes, {:.1} % with a wrong argmax.\n\n",
+            f.model.rot_bins,
+            f.fit_samples,
+            f.model.weights.iter().map(|w| (w * 1000.0).round() / 1000.0).collect::<Vec<_>>(),
+            f.model.bias,
+            h.samples,
+            h.episodes,
+            100.0 * h.wrong_rate
+        ));
+        s.push_str("| estimated risk | decision points | mean estimate | observed wrong |\n|---|---|---|---|\n");
+        for (i, &(k, est, obs)) in h.reliability.iter().enumerate() {
+            s.push_str(&format!(
+                "| [{}, {}) | {} | {:.4} | {:.4} |\n",
+                RISK_BINS[i],
+                RISK_BINS[i + 1].min(1.0),
+                k,
+                est,
+                obs
+            ));
+        }
+        s.push_str("\nStopping at the first decision point whose estimate is below P:\n\n| P | episodes stopped | of which wrong |\n|---|---|---|\n");
+        for &(p, n, w) in &h.first_crossing {
+            s.push_str(&format!("| {p} | {n} | {:.4} |\n", w));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Runs `activesense calibrate`.
+pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
+    let agents = a
+        .agents
+        .split(',')
+        .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let rot_bins = a
+        .rot_bins
+        .split(',')
+        .map(|s| {
+            s.trim()
+                .parse::<u8>()
+                .map_err(|e| anyhow::anyhow!("--rot-bins '{s}': {e}"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    if a.plans < 2 {
+        anyhow::bail!("--plans must be at least 2 (half fit, half check)");
+    }
+    if let Some(t) = a.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build_global()
+            .ok();
+    }
+    let policies = if agents
+        .iter()
+        .any(|k| matches!(k, AgentKind::Learnt | AgentKind::LearntInt8))
+    {
+        Policies::load(&[], &rot_bins)?
+    } else {
+        Policies::default()
+    };
+    let opts = EvalOptions {
+        agents: agents.clone(),
+        rot_bins: rot_bins.clone(),
+        plans: a.plans,
+        first_seed: a.first_seed,
+        episode_seed: a.episode_seed,
+        config: EpisodeConfig {
+            max_actions: a.max_actions,
+            ..EpisodeConfig::default()
+        },
+        sensor: Default::default(),
+        termination: Termination::ActionLimit,
+        policy_files: Vec::new(),
+        policies,
+        progress: !a.no_progress,
+        curve_plans: 0,
+        user_plans: Vec::new(),
+        refused_plans: Vec::new(),
+    };
+    let command = std::iter::once("activesense".to_string())
+        .chain(std::env::args().skip(1))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let t0 = std::time::Instant::now();
+    let mut fitted = Vec::new();
+    for &k in &rot_bins {
+        eprintln!(
+            "K = {k}: running {} episodes",
+            agents.len() as u32 * a.plans
+        );
+        let episodes = collect(&opts, k, opts.progress);
+        if let Some(path) = &a.samples_out {
+            use std::io::Write;
+            let mut f = std::io::BufWriter::new(
+                std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(path)?,
+            );
+            for s in episodes.iter().flatten() {
+                writeln!(f, "{}", serde_json::json!({"rot_bins": k, "sample": s}))?;
+            }
+        }
+        let (fit, check): (Vec<&EpisodeSamples>, Vec<&EpisodeSamples>) = episodes
+            .iter()
+            .filter(|e| !e.is_empty())
+            .partition(|e| e[0].plan % 2 == 0);
+        let xs: Vec<[f64; FEATURES]> = fit
+            .iter()
+            .flat_map(|e| e.iter())
+            .map(|s| s.features.to_vector().map(|v| v as f64))
+            .collect();
+        let ys: Vec<bool> = fit.iter().flat_map(|e| e.iter()).map(|s| s.wrong).collect();
+        if xs.is_empty() {
+            anyhow::bail!("K = {k}: no decision point passed the stop gate; nothing to fit");
+        }
+        let (w, b) = fit_logistic(&xs, &ys, a.ridge);
+        let model = StopModel {
+            rot_bins: k,
+            weights: w.map(|v| v as f32),
+            bias: b as f32,
+        };
+        let held_out = held_out(&model, &check);
+        fitted.push(Fitted {
+            model,
+            fit_samples: xs.len(),
+            held_out,
+        });
+    }
+    std::fs::create_dir_all(&a.out)?;
+    std::fs::write(&a.rust_out, rust_source(&fitted, &command))?;
+    std::fs::write(a.out.join("calibration.md"), markdown(&fitted, &command))?;
+    std::fs::write(
+        a.out.join("calibration.json"),
+        serde_json::to_string_pretty(&fitted)?,
+    )?;
+    eprintln!(
+        "wrote {}, {}/calibration.{{md,json}} in {:.0} s",
+        a.rust_out.display(),
+        a.out.display(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The fit recovers a known logistic model from its own samples.
+    #[test]
+    fn logistic_fit_recovers_known_weights() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let w_true = [1.5, -0.5, 0.0, 2.0, -1.0, 0.5, -0.7, 1.0, 0.3, -1.2];
+        let b_true = -1.0;
+        let mut xs = Vec::new();
+        let mut ys = Vec::new();
+        for _ in 0..20_000 {
+            let x: [f64; FEATURES] = std::array::from_fn(|_| rng.gen_range(-2.0..2.0));
+            let z = b_true + w_true.iter().zip(&x).map(|(w, v)| w * v).sum::<f64>();
+            let p = 1.0 / (1.0 + (-z).exp());
+            xs.push(x);
+            ys.push(rng.gen_bool(p));
+        }
+        let (w, b) = fit_logistic(&xs, &ys, 1e-6);
+        for (got, want) in w.iter().zip(&w_true) {
+            assert!((got - want).abs() < 0.12, "{w:?} vs {w_true:?}");
+        }
+        assert!((b - b_true).abs() < 0.12, "{b}");
+    }
+}
