@@ -7,7 +7,7 @@
 //! cargo xtask setup        # only the installs: thumbv7em-none-eabihf target, qemu-system-arm, chromium
 //! cargo xtask firmware     # build the firmware ELF (profile `firmware`)
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
-//! cargo xtask mcu-bench [--episodes N] [--agent NAME]  # instructions per update / decision / registration (QEMU -icount)
+//! cargo xtask mcu-bench [--episodes N] [--agent NAME] [--termination T]  # instructions per update / decision / registration (QEMU -icount)
 //! cargo xtask qemu-log     # the firmware's defmt log (smoke boot + one session), decoded
 //! ```
 
@@ -63,7 +63,7 @@ fn print_help() {
          qemu-log    decode the firmware's defmt log (smoke boot and one short session)\n  \
          size        firmware flash / static RAM against the budgets (512 KiB / 96 KiB)\n  \
          fuzz [SECS] run the cargo-fuzz targets `session` and `policy_blob` for SECS seconds each (default 60)\n  \
-         mcu-bench [--episodes N] [--agent NAME]\n              \
+         mcu-bench [--episodes N] [--agent NAME] [--termination T]\n              \
          instructions per GHT update, rotation and registration on the Cortex-M4 under\n              \
          QEMU -icount shift=0, K = 1 and K = 10, N episodes each (default 20)"
     );
@@ -248,13 +248,14 @@ fn qemu_smoke() -> Result<()> {
     Ok(())
 }
 
-/// `cargo xtask mcu-bench [--episodes N] [--agent NAME]`: builds the firmware and runs N simulated
+/// `cargo xtask mcu-bench [--episodes N] [--agent NAME] [--termination T]`: builds the firmware and runs N simulated
 /// episodes per rotation-bin setting against it under `qemu-system-arm -icount shift=0`
 /// (`activesense mcu-bench`, which prints the markdown table). Deterministic: the same
 /// command gives the same numbers.
 fn mcu_bench(args: &[String]) -> Result<()> {
     let mut episodes = 20u32;
     let mut agent = "heuristic-1".to_string();
+    let mut termination = "oracle".to_string();
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -266,6 +267,12 @@ fn mcu_bench(args: &[String]) -> Result<()> {
                     .context("--episodes needs a number")?
             }
             "--agent" => agent = it.next().context("--agent needs a name")?.clone(),
+            "--termination" => {
+                termination = it
+                    .next()
+                    .context("--termination needs oracle, confident or action-limit")?
+                    .clone()
+            }
             other => bail!("mcu-bench: unknown argument '{other}'"),
         }
     }
@@ -278,6 +285,8 @@ fn mcu_bench(args: &[String]) -> Result<()> {
             &episodes.to_string(),
             "--agent",
             &agent,
+            "--termination",
+            &termination,
             "--elf",
         ])
         .arg(&elf))
