@@ -231,7 +231,8 @@ impl Default for LocalizerConfig {
     }
 }
 
-/// The "confident" test for when no ground truth exists ([`GhtLocalizer::is_confident`]).
+/// A belief-only "confident" test ([`GhtLocalizer::is_confident`]). The pipeline's confident
+/// stop used it before issue 12; it now uses the calibrated estimate of [`crate::stop`].
 ///
 /// Default: peak mass ≥ 0.95 and entropy ≤ 4 nats. The belief is over-confident: with 0.5,
 /// heuristic-1 stopped confidently but wrongly in 9 % (K = 1) and 26 % (K = 10) of 1000 test
