@@ -28,7 +28,10 @@
 //! and the belief has already weighed that ambiguity.
 //!
 //! Cost: `1 + n + (n − 1)` screened registrations and one full one (`cargo xtask
-//! mcu-bench` reports the end-of-episode time on the MCU).
+//! mcu-bench` reports the end-of-episode time on the MCU). Cheaper screening was measured
+//! and not taken (heuristic-1, K = 10, 1000 test plans, mean pose error over recognised
+//! episodes): a 3-heading sweep instead of 9 gave 0.075 m, starting the leave-out fits from
+//! the all-readings fit without a sweep 0.091 m, against 0.070 m as built.
 
 use crate::floorplan::FloorPlan;
 use crate::geometry::Pose2;
