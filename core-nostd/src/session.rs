@@ -1204,8 +1204,8 @@ mod tests {
         assert_eq!(ctl.cycles(), c.updates());
     }
 
-    #[test]
-    fn host_only_agents_are_refused() {
+    /// A session that said hello and holds the square plan (request ids 1 and 2 used).
+    fn session_with_square() -> Session {
         let mut s = Session::new(CFG);
         call(
             &mut s,
@@ -1215,6 +1215,12 @@ mod tests {
             },
         );
         call(&mut s, 2, &Request::LoadPlan { vertices: square() });
+        s
+    }
+
+    #[test]
+    fn host_only_agents_are_refused() {
+        let mut s = session_with_square();
         // The float network and the greedy benchmarks live on the host only.
         let host_only = [
             AgentKind::Learnt,
@@ -1328,15 +1334,7 @@ mod tests {
 
     #[test]
     fn stop_rule_params_are_validated_and_carried() {
-        let mut s = Session::new(CFG);
-        call(
-            &mut s,
-            1,
-            &Request::Hello {
-                protocol: PROTOCOL_VERSION,
-            },
-        );
-        call(&mut s, 2, &Request::LoadPlan { vertices: square() });
+        let mut s = session_with_square();
         let mut id = 3;
         for risk in [f32::NAN, 0.0, 1.5, -0.5, f32::INFINITY] {
             let mut p = params(5);
