@@ -141,6 +141,9 @@ pub struct PipelineResult {
     /// The winning hypothesis of the multi-hypothesis refinement ([`crate::refine`]);
     /// its registration is `refined`.
     pub refinement: Option<Refinement>,
+    /// The calibrated stop's estimate of P(wrong) at the end ([`Pipeline::stop_risk_estimate`]);
+    /// `None` below the stop gate or when the refined pose and the argmax disagree.
+    pub stop_risk: Option<f32>,
 }
 
 impl PipelineResult {
@@ -277,14 +280,23 @@ impl Pipeline {
     /// mass reaches [`stop::GATE_PEAK_MASS`], before [`Pipeline::min_measurements`], or when
     /// the readings do not register.
     pub fn stop_features(&self) -> Option<StopFeatures> {
+        let peak_mass = self.stop_gate()?;
+        let refined = self.refine(&self.plan).ok()?;
+        self.features_of(peak_mass, &refined)
+    }
+
+    /// The belief's peak mass when the stop gate is open (enough readings, peak mass at
+    /// least [`stop::GATE_PEAK_MASS`]).
+    fn stop_gate(&self) -> Option<f32> {
         if !self.voted || self.observations.len() < self.min_measurements() {
             return None;
         }
         let peak_mass = self.localizer.peak_mass(self.order);
-        if peak_mass < stop::GATE_PEAK_MASS {
-            return None;
-        }
-        let refined = self.refine(&self.plan).ok()?;
+        (peak_mass >= stop::GATE_PEAK_MASS).then_some(peak_mass)
+    }
+
+    /// [`StopFeatures`] of an already computed refinement.
+    fn features_of(&self, peak_mass: f32, refined: &Refinement) -> Option<StopFeatures> {
         let grid = self.localizer.grid();
         let argmax = self.localizer.argmax()?;
         let coarse = grid.pose_of(argmax);
@@ -322,8 +334,12 @@ impl Pipeline {
     /// no features yet or the refined pose does not agree with the argmax
     /// ([`StopFeatures::agrees`]: then the episode does not stop).
     pub fn stop_risk_estimate(&self) -> Option<f32> {
-        let f = self.stop_features().filter(|f| f.agrees)?;
-        Some(StopModel::for_rot_bins(self.params.rot_bins).risk(&f))
+        self.risk_of(&self.stop_features()?)
+    }
+
+    fn risk_of(&self, f: &StopFeatures) -> Option<f32> {
+        f.agrees
+            .then(|| StopModel::for_rot_bins(self.params.rot_bins).risk(f))
     }
 
     /// Fewest measurements before the episode may stop: as many as the registration has
@@ -398,10 +414,16 @@ impl Pipeline {
             Some(Ok(r)) => (Some(r), None),
             Some(Err(e)) => (None, Some(e)),
         };
+        // The stop estimate at the end, from the same refinement (no second one).
+        let stop_risk = refined.as_ref().and_then(|r| {
+            let f = self.features_of(self.stop_gate()?, r)?;
+            self.risk_of(&f)
+        });
         PipelineResult {
             coarse,
             refined: refined.map(|r| r.registration),
             refinement: refined,
+            stop_risk,
             registration_error,
             recognised,
             symmetry_order: self.order,

@@ -212,6 +212,10 @@ pub struct Outcome {
     pub pose_error: Option<f32>,
     /// Why registration did not run or failed, if it did not produce a pose.
     pub registration_note: Option<String>,
+    /// The calibrated stop's estimate of P(wrong) at the end
+    /// ([`activesense_core::pipeline::PipelineResult::stop_risk`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stop_risk: Option<f32>,
 }
 
 /// A complete episode.
@@ -391,6 +395,7 @@ pub fn score(plan: &FloorPlan, truth: &Pose2, result: &PipelineResult) -> Outcom
         // Without a registration (fewer than 2 measurements) the pipeline's answer is
         // the coarse estimate, and that is what gets scored.
         pose_error: result.best().map(err),
+        stop_risk: result.stop_risk,
         registration_note: result.registration_error.map(|e| {
             if result.coarse.is_some() {
                 format!("registration not possible ({e:?}); coarse estimate used")

@@ -154,7 +154,9 @@ impl EpisodeRow {
             symmetry_order: t.outcome.symmetry_order,
             final_peak_mass: 0.0,
             stopped_by_rule: t.end != crate::episode::EndReason::ActionLimit,
-            risk_at_stop: None,
+            risk_at_stop: (t.end == crate::episode::EndReason::Confident)
+                .then_some(t.outcome.stop_risk)
+                .flatten(),
             repeated_bearings: {
                 let mut seen = std::collections::BTreeSet::new();
                 t.steps
@@ -329,8 +331,6 @@ struct CurveRecorder {
     samples: Vec<(f32, f32, bool, Option<f32>)>,
     /// The belief's peak mass (its stated confidence) after the last vote.
     peak_mass: f32,
-    /// The calibrated risk estimate when the confident rule stopped the episode.
-    risk_at_stop: Option<f32>,
 }
 
 impl CurveRecorder {
@@ -343,9 +343,6 @@ impl CurveRecorder {
             Some(st) => (st.cost, st.coarse_success),
         };
         let measured = v.step.is_some_and(|st| st.range.is_some());
-        if v.runner.stop() == Some(activesense_core::pipeline::Stop::Confident) {
-            self.risk_at_stop = pipe.stop_risk_estimate();
-        }
         if measured {
             // The belief changes only when a range is voted.
             self.peak_mass = loc.peak_mass(pipe.symmetry_order());
@@ -698,7 +695,6 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
                 register: i < opts.curve_plans,
                 samples: Vec::new(),
                 peak_mass: 0.0,
-                risk_at_stop: None,
             };
             // The policies were loaded for every evaluated setting before the run.
             let (traj, decided) =
@@ -706,7 +702,6 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
                     .expect("policy loaded for every K");
             let mut row = EpisodeRow::of(&traj);
             row.final_peak_mass = rec.peak_mass;
-            row.risk_at_stop = rec.risk_at_stop;
             bar.inc(1);
             (
                 g,

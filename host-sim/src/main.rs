@@ -717,6 +717,17 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
             o.registration_note.as_deref().unwrap_or("not registered")
         ),
     }
+    match o.stop_risk {
+        Some(r) => println!(
+            "estimated risk of a wrong registration: {:.2} % (the confident stop stops below {:.2} %)",
+            100.0 * r,
+            100.0 * t.spec.config.stop_risk
+        ),
+        None => println!(
+            "estimated risk of a wrong registration: not available (belief peak mass below {} or the refined pose outside the argmax cell)",
+            activesense_core::stop::GATE_PEAK_MASS
+        ),
+    }
     if let Some(path) = &a.json {
         // The inspection arrays (K × 900 floats per step) are written compactly.
         let text = if t.inspection.is_some() {
