@@ -623,6 +623,7 @@ pub(crate) mod tests {
         assert!(risk < DEFAULT_STOP_RISK);
         let r = p.finish(&plan);
         assert_eq!(r.recognised, Some(true));
+        assert_eq!(r.stop_risk, Some(risk), "finish reports the estimate it stopped on");
         let best = r.best().unwrap();
         assert!(
             (best.translation() - truth.translation()).norm() < 0.02,
