@@ -312,8 +312,9 @@ impl Pipeline {
         Some(StopFeatures {
             peak_mass,
             entropy: self.localizer.entropy(),
-            readings: self.observations.len() as u16,
-            explained: refined.fit.explained,
+            readings: refined.fit.bearings,
+            repeats: (self.observations.len() as u16).saturating_sub(refined.fit.bearings),
+            explained: refined.fit.explained_bearings,
             unknowns: self.min_measurements() as u8,
             observability: self.observability().map_or(0.0, |o| o.min_eigenvalue),
             offset_cells,
@@ -623,7 +624,11 @@ pub(crate) mod tests {
         assert!(risk < DEFAULT_STOP_RISK);
         let r = p.finish(&plan);
         assert_eq!(r.recognised, Some(true));
-        assert_eq!(r.stop_risk, Some(risk), "finish reports the estimate it stopped on");
+        assert_eq!(
+            r.stop_risk,
+            Some(risk),
+            "finish reports the estimate it stopped on"
+        );
         let best = r.best().unwrap();
         assert!(
             (best.translation() - truth.translation()).norm() < 0.02,

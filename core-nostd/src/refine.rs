@@ -332,6 +332,16 @@ mod tests {
         let model = RangeModel::default();
         let good = registration::range_fit(&plan, &obs, &pose, &model);
         assert_eq!(good.explained, 4);
+        assert_eq!((good.bearings, good.explained_bearings), (4, 4));
+        // A range repeated at a bearing already measured is another reading, not another check.
+        let mut repeated = obs.clone();
+        let again = plan
+            .ray_cast(pose.translation(), unit(pose.theta + 0.3))
+            .unwrap()
+            .range;
+        repeated.push(Measurement::new(0.3, again)).unwrap();
+        let r = registration::range_fit(&plan, &repeated, &pose, &model);
+        assert_eq!((r.explained, r.bearings, r.explained_bearings), (5, 4, 4));
         obs.push(Measurement::new(2.0, 40.0)).unwrap();
         let with_outlier = registration::range_fit(&plan, &obs, &pose, &model);
         assert_eq!(with_outlier.explained, 4);

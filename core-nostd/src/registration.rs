@@ -324,6 +324,11 @@ pub struct RangeFit {
     pub log_likelihood: f32,
     /// Readings within 3σ of the ray-cast range.
     pub explained: u16,
+    /// Distinct bearings among the readings (a bearing measured twice is one direction).
+    pub bearings: u16,
+    /// Distinct bearings with at least one explained reading: the independent checks the
+    /// pose passed (repeating a range at one bearing re-checks the same wall point).
+    pub explained_bearings: u16,
 }
 
 /// [`RangeFit`] of every reading of `obs` at AgentPose `pose` (excluded or not: the
@@ -339,7 +344,10 @@ pub fn range_fit(
     let outlier = model.outlier_prob.clamp(0.0, 1.0) / model.max_range.max(1e-6);
     let peak = (1.0 - model.outlier_prob.clamp(0.0, 1.0)) / (sigma * sqrt(TAU));
     let (mut log_likelihood, mut explained) = (0.0f32, 0u16);
-    for p in obs.pts.iter() {
+    let (mut bearings, mut explained_bearings) = (0u16, 0u16);
+    // Whether reading i was explained (for the per-bearing counts).
+    let mut ok = [false; MAX_OBSERVATIONS];
+    for (i, p) in obs.pts.iter().enumerate() {
         let measured = length(p.s);
         let predicted = plan.ray_cast(a, rotate(p.d, pose.theta)).map(|h| h.range);
         let density = match predicted {
@@ -347,6 +355,7 @@ pub fn range_fit(
                 let z = (measured - r) / sigma;
                 if abs(z) <= 3.0 {
                     explained += 1;
+                    ok[i] = true;
                 }
                 // exp underflows to 0 far out, leaving the outlier density: no NaN.
                 peak * exp(-0.5 * z * z) + outlier
@@ -355,9 +364,21 @@ pub fn range_fit(
         };
         log_likelihood += ln(density.max(f32::MIN_POSITIVE));
     }
+    // Encoder bearings repeat exactly, so equal directions are the same bearing.
+    for (i, p) in obs.pts.iter().enumerate() {
+        let same = |j: usize| obs.pts[j].d == p.d;
+        if !(0..i).any(same) {
+            bearings += 1;
+        }
+        if ok[i] && !(0..i).any(|j| ok[j] && same(j)) {
+            explained_bearings += 1;
+        }
+    }
     RangeFit {
         log_likelihood,
         explained,
+        bearings,
+        explained_bearings,
     }
 }
 

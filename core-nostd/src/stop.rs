@@ -24,7 +24,7 @@ pub const GATE_PEAK_MASS: f32 = 0.5;
 pub const EDGE_SCALE: f32 = 0.02;
 
 /// Number of features of [`StopFeatures::to_vector`].
-pub const FEATURES: usize = 10;
+pub const FEATURES: usize = 11;
 
 /// What the stop estimate looks at, after a measurement.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -34,9 +34,14 @@ pub struct StopFeatures {
     pub peak_mass: f32,
     /// Entropy of the belief (nats).
     pub entropy: f32,
-    /// Readings so far.
+    /// Distinct bearings measured so far (a range repeated at one bearing checks nothing new:
+    /// counting readings let an agent that repeats itself look certain).
     pub readings: u16,
-    /// Readings the refined pose explains (within 3σ, [`crate::registration::range_fit`]).
+    /// Readings taken at a bearing already measured. Repeating a range sharpens the voting
+    /// belief without adding evidence, so a belief built on repeats over-states itself.
+    pub repeats: u16,
+    /// Distinct bearings whose readings the refined pose explains (within 3σ,
+    /// [`crate::registration::RangeFit::explained_bearings`]).
     pub explained: u16,
     /// Unknowns of the pose (2 with the heading known, 3 without).
     pub unknowns: u8,
@@ -64,8 +69,8 @@ impl StopFeatures {
     /// The model's input vector: logit of the peak mass, entropy, ln(readings), readings
     /// left unexplained, explained readings beyond the unknowns (capped at 10: the checks
     /// the fit passed), observability, the refined pose's offsets from the argmax (cells,
-    /// bins), closeness to the cell's edge `exp(−margin / 2 cm)`, and the fraction of
-    /// readings left unexplained.
+    /// bins), closeness to the cell's edge `exp(−margin / 2 cm)`, the fraction of
+    /// bearings left unexplained, and repeated readings per distinct bearing.
     pub fn to_vector(&self) -> [f32; FEATURES] {
         let p = self.peak_mass.clamp(1e-4, 1.0 - 1e-4);
         let unexplained = self.readings.saturating_sub(self.explained) as f32;
@@ -81,6 +86,7 @@ impl StopFeatures {
             self.offset_bins,
             exp(-self.edge_margin.max(0.0) / EDGE_SCALE),
             unexplained / (self.readings as f32).max(1.0),
+            self.repeats as f32 / (self.readings as f32).max(1.0),
         ]
     }
 }
@@ -137,6 +143,7 @@ mod tests {
             peak_mass: peak,
             entropy: 2.0,
             readings,
+            repeats: 0,
             explained,
             unknowns: 3,
             observability: 0.2,
@@ -151,7 +158,7 @@ mod tests {
     fn risk_is_a_probability_and_follows_the_weights() {
         let m = StopModel {
             rot_bins: 10,
-            weights: [-1.0, 0.0, 0.0, 2.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0],
+            weights: [-1.0, 0.0, 0.0, 2.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
             bias: 0.5,
         };
         let sure = m.risk(&features(0.999, 8, 8));

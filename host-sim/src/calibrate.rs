@@ -27,7 +27,7 @@ use std::path::PathBuf;
 pub struct CalibrateArgs {
     /// Agents whose episodes provide the samples (comma-separated; the learnt agent uses the
     /// committed policies).
-    #[arg(long, default_value = "heuristic-1,learnt,blind-0,heuristic-0")]
+    #[arg(long, default_value = "heuristic-1,learnt,blind-0,heuristic-0,oigm")]
     pub agents: String,
     /// Rotation settings to fit (one model each).
     #[arg(long, default_value = "1,10")]
@@ -115,25 +115,41 @@ pub fn collect(opts: &EvalOptions, rot_bins: u8, progress: bool) -> Vec<EpisodeS
 }
 
 /// Logistic regression `P(y) = σ(w·x + b)` by Newton–Raphson with an L2 penalty `ridge`
-/// on `w`; returns `(w, b)`.
+/// on `w`; returns `(w, b)`. Each Newton step is halved until the penalised log-loss does
+/// not rise, so (quasi-)separable data cannot make the weights run away.
 pub fn fit_logistic(xs: &[[f64; FEATURES]], ys: &[bool], ridge: f64) -> ([f64; FEATURES], f64) {
     const D: usize = FEATURES + 1;
+    let ext = |x: &[f64; FEATURES]| -> [f64; D] {
+        std::array::from_fn(|k| if k < FEATURES { x[k] } else { 1.0 })
+    };
+    let loss = |beta: &[f64; D]| -> f64 {
+        let mut l = 0.0;
+        for (x, &y) in xs.iter().zip(ys) {
+            let z: f64 = ext(x).iter().zip(beta).map(|(a, b)| a * b).sum();
+            // log(1 + e^z) − y·z, written so that neither branch overflows.
+            let softplus = if z > 0.0 {
+                z + (-z).exp().ln_1p()
+            } else {
+                z.exp().ln_1p()
+            };
+            l += softplus - if y { z } else { 0.0 };
+        }
+        l + 0.5 * ridge * beta[..FEATURES].iter().map(|b| b * b).sum::<f64>()
+    };
     let mut beta = [0.0f64; D];
     // Start the bias at the base rate.
     let p0 = (ys.iter().filter(|&&y| y).count() as f64 + 0.5) / (ys.len() as f64 + 1.0);
     beta[FEATURES] = (p0 / (1.0 - p0)).ln();
-    for _ in 0..50 {
+    let mut current = loss(&beta);
+    for _ in 0..100 {
         let mut grad = [0.0f64; D];
         let mut hess = [[0.0f64; D]; D];
         for (x, &y) in xs.iter().zip(ys) {
-            let mut z = beta[FEATURES];
-            for k in 0..FEATURES {
-                z += beta[k] * x[k];
-            }
+            let xe = ext(x);
+            let z: f64 = xe.iter().zip(&beta).map(|(a, b)| a * b).sum();
             let p = 1.0 / (1.0 + (-z).exp());
             let r = p - y as u8 as f64;
             let w = (p * (1.0 - p)).max(1e-12);
-            let xe: [f64; D] = std::array::from_fn(|k| if k < FEATURES { x[k] } else { 1.0 });
             for a in 0..D {
                 grad[a] += r * xe[a];
                 for b in 0..D {
@@ -146,12 +162,20 @@ pub fn fit_logistic(xs: &[[f64; FEATURES]], ys: &[bool], ridge: f64) -> ([f64; F
             hess[a][a] += ridge;
         }
         let Some(step) = solve(hess, grad) else { break };
-        let mut change = 0.0f64;
-        for a in 0..D {
-            beta[a] -= step[a];
-            change = change.max(step[a].abs());
+        let mut scale = 1.0;
+        let mut accepted = false;
+        for _ in 0..40 {
+            let trial: [f64; D] = std::array::from_fn(|a| beta[a] - scale * step[a]);
+            let l = loss(&trial);
+            if l.is_finite() && l <= current {
+                beta = trial;
+                accepted = current - l > 1e-10 * current.abs().max(1.0);
+                current = l;
+                break;
+            }
+            scale *= 0.5;
         }
-        if change < 1e-9 {
+        if !accepted {
             break;
         }
     }
@@ -285,7 +309,7 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
 pub fn markdown(fitted: &[Fitted], command: &str) -> String {
     let mut s = String::from("# Calibrated stop: fit and held-out check\n\n");
     s.push_str(&format!("Produced by `{command}`.\n\n"));
-    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the argmax cell's edge, fraction of readings unexplained (`core-nostd/src/stop.rs`).\n\n");
+    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the argmax cell's edge, fraction of bearings unexplained, repeated readings per bearing (`core-nostd/src/stop.rs`; readings and explained readings are counted per distinct bearing).\n\n");
     for f in fitted {
         let h = &f.held_out;
         s.push_str(&format!(
@@ -445,7 +469,7 @@ mod tests {
     #[test]
     fn logistic_fit_recovers_known_weights() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
-        let w_true = [1.5, -0.5, 0.0, 2.0, -1.0, 0.5, -0.7, 1.0, 0.3, -1.2];
+        let w_true = [1.5, -0.5, 0.0, 2.0, -1.0, 0.5, -0.7, 1.0, 0.3, -1.2, 0.8];
         let b_true = -1.0;
         let mut xs = Vec::new();
         let mut ys = Vec::new();
@@ -461,5 +485,25 @@ mod tests {
             assert!((got - want).abs() < 0.12, "{w:?} vs {w_true:?}");
         }
         assert!((b - b_true).abs() < 0.12, "{b}");
+    }
+
+    /// Perfectly separable data (the first feature decides the label) must not make the
+    /// weights run away: the step halving and the ridge keep them finite and moderate.
+    #[test]
+    fn logistic_fit_stays_finite_on_separable_data() {
+        let mut xs = Vec::new();
+        let mut ys = Vec::new();
+        for i in 0..2000 {
+            let v = (i as f64 / 1000.0) - 1.0;
+            let mut x = [0.0; FEATURES];
+            x[0] = v;
+            x[1] = (i % 7) as f64;
+            xs.push(x);
+            ys.push(v > 0.0);
+        }
+        let (w, b) = fit_logistic(&xs, &ys, 1e-3);
+        assert!(w.iter().all(|v| v.is_finite() && v.abs() < 1e4), "{w:?}");
+        assert!(b.is_finite() && b.abs() < 1e4);
+        assert!(w[0] > 10.0, "the deciding feature dominates: {w:?}");
     }
 }
