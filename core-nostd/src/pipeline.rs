@@ -163,6 +163,11 @@ pub struct Pipeline {
     order: u8,
     voted: bool,
     ready: bool,
+    /// The last refinement of the episode's plan and the state it saw (readings, localizer
+    /// updates): at the stop
+    /// step the confident rule and [`Pipeline::finish`] refine the same readings, and on the
+    /// instrument one refinement is up to seconds.
+    last_refinement: Option<((usize, u32), Refinement)>,
 }
 
 impl Default for Pipeline {
@@ -190,6 +195,7 @@ impl Pipeline {
             order: 1,
             voted: false,
             ready: false,
+            last_refinement: None,
         }
     }
 
@@ -226,6 +232,7 @@ impl Pipeline {
         self.order = symmetry_order(plan, &SymmetryTolerance::default());
         self.plan = plan.clone();
         self.observations.clear();
+        self.last_refinement = None;
         self.params = *params;
         self.voted = false;
         self.ready = true;
@@ -245,9 +252,16 @@ impl Pipeline {
     }
 
     /// After a measurement: should the episode stop?
-    pub fn should_stop(&self) -> Option<Stop> {
+    pub fn should_stop(&mut self) -> Option<Stop> {
         if !self.voted || self.observations.len() < self.min_measurements() {
             return None;
+        }
+        if self.params.termination == Termination::Confident && self.stop_gate().is_some() {
+            // Keep the refinement the rule is about to need, for `finish` as well.
+            let key = self.refinement_key();
+            if self.last_refinement.is_none_or(|(k, _)| k != key) {
+                self.last_refinement = self.refine(&self.plan).ok().map(|r| (key, r));
+            }
         }
         let stop = self.belief_says_stop()?;
         if self.params.min_observability > 0.0
@@ -433,7 +447,14 @@ impl Pipeline {
     }
 
     /// The multi-hypothesis refinement ([`crate::refine`]) of the readings so far.
+    /// Deterministic: the confident rule's kept result is returned when the readings have
+    /// not changed since.
     pub fn refine(&self, plan: &FloorPlan) -> Result<Refinement, RegistrationError> {
+        if let Some((seen, r)) = self.last_refinement {
+            if seen == self.refinement_key() && *plan == self.plan {
+                return Ok(r);
+            }
+        }
         refine::refine(&RefineInput {
             plan,
             obs: &self.observations,
@@ -445,6 +466,12 @@ impl Pipeline {
             unknowns: self.min_measurements(),
             model: RangeModel::default(),
         })
+    }
+
+    /// What a refinement depends on besides the plan and the parameters fixed at
+    /// [`Pipeline::start`]: the readings and the belief.
+    fn refinement_key(&self) -> (usize, u32) {
+        (self.observations.len(), self.localizer.updates())
     }
 
     /// Lends the idle localizer's accumulator memory (see
@@ -600,12 +627,14 @@ pub(crate) mod tests {
         let mut p = Pipeline::new_empty();
         p.start(&plan, &params).unwrap();
         let mut stopped = false;
+        let mut taken: heapless::Vec<(f32, f32), 48> = heapless::Vec::new();
         for k in 0..40 {
             let bearing = k as f32 * 0.77;
             let hit = plan
                 .ray_cast(truth.translation(), unit(truth.theta + bearing))
                 .unwrap();
             assert!(p.measure(bearing, hit.range));
+            taken.push((bearing, hit.range)).unwrap();
             if p.should_stop() == Some(Stop::Confident) {
                 stopped = true;
                 break;
@@ -639,5 +668,22 @@ pub(crate) mod tests {
         assert_eq!(p.should_stop(), None);
         p.params.stop_risk = risk * 1.01;
         assert_eq!(p.should_stop(), Some(Stop::Confident));
+
+        // The kept refinement follows the readings: after one more range the pipeline's
+        // refinement equals that of a fresh pipeline fed the same ranges.
+        let kept = p.refine(&plan).unwrap();
+        let hit = plan
+            .ray_cast(truth.translation(), unit(truth.theta + 0.4))
+            .unwrap();
+        assert!(p.measure(0.4, hit.range));
+        taken.push((0.4, hit.range)).unwrap();
+        let mut fresh = Pipeline::new_empty();
+        fresh.start(&plan, &params).unwrap();
+        for &(b, r) in taken.iter() {
+            assert!(fresh.measure(b, r));
+        }
+        let after = p.refine(&plan).unwrap();
+        assert_eq!(after, fresh.refine(&plan).unwrap());
+        assert_ne!(after.fit.log_likelihood, kept.fit.log_likelihood);
     }
 }
