@@ -25,7 +25,7 @@
 
 use crate::floorplan::FloorPlan;
 use crate::geometry::Pose2;
-use crate::localization::{GhtLocalizer, LocError, LocalizerConfig};
+use crate::localization::{CellIndex, GhtLocalizer, LocError, LocalizerConfig};
 use crate::refine::{self, RefineInput, Refinement};
 use crate::registration::{
     self, AnnealParams, Measurement, Observability, Observations, RangeModel, Registration,
@@ -144,6 +144,10 @@ pub struct PipelineResult {
     /// The calibrated stop's estimate of P(wrong) at the end ([`Pipeline::stop_risk_estimate`]);
     /// `None` below the stop gate or when the refined pose and the argmax disagree.
     pub stop_risk: Option<f32>,
+    /// Readings the answer (`coarse`, `refined`, `recognised`, `stop_risk`) is based on: all
+    /// of them, except when a confident episode reached its action limit without stopping
+    /// and answers with its lowest-risk moment instead ([`Pipeline::finish`]).
+    pub answer_readings: u16,
 }
 
 impl PipelineResult {
@@ -168,6 +172,19 @@ pub struct Pipeline {
     /// step the confident rule and [`Pipeline::finish`] refine the same readings, and on the
     /// instrument one refinement is up to seconds.
     last_refinement: Option<((usize, u32), Refinement)>,
+    /// The confident rule's lowest-risk moment so far ([`Pipeline::finish`]).
+    best_answer: Option<Answer>,
+}
+
+/// One moment of a confident episode, kept as its answer should the episode never become
+/// confident enough to stop.
+#[derive(Clone, Copy, Debug)]
+struct Answer {
+    risk: f32,
+    cell: CellIndex,
+    refinement: Refinement,
+    observability: Option<Observability>,
+    readings: u16,
 }
 
 impl Default for Pipeline {
@@ -196,6 +213,7 @@ impl Pipeline {
             voted: false,
             ready: false,
             last_refinement: None,
+            best_answer: None,
         }
     }
 
@@ -233,6 +251,7 @@ impl Pipeline {
         self.plan = plan.clone();
         self.observations.clear();
         self.last_refinement = None;
+        self.best_answer = None;
         self.params = *params;
         self.voted = false;
         self.ready = true;
@@ -256,14 +275,28 @@ impl Pipeline {
         if !self.voted || self.observations.len() < self.min_measurements() {
             return None;
         }
-        if self.params.termination == Termination::Confident && self.stop_gate().is_some() {
-            // Keep the refinement the rule is about to need, for `finish` as well.
-            let key = self.refinement_key();
-            if self.last_refinement.is_none_or(|(k, _)| k != key) {
-                self.last_refinement = self.refine(&self.plan).ok().map(|r| (key, r));
+        let stop = match self.params.termination {
+            Termination::Confident => {
+                let risk = self.stop_gate().and_then(|_| {
+                    // Keep the refinement the rule is about to need, for `finish` as well.
+                    let key = self.refinement_key();
+                    if self.last_refinement.is_none_or(|(k, _)| k != key) {
+                        self.last_refinement = self.refine(&self.plan).ok().map(|r| (key, r));
+                    }
+                    let risk = self.stop_risk_estimate()?;
+                    self.remember_if_best(risk);
+                    Some(risk)
+                });
+                risk.filter(|&r| r < self.params.stop_risk)
+                    .map(|_| Stop::Confident)?
             }
-        }
-        let stop = self.belief_says_stop()?;
+            Termination::Oracle => self
+                .params
+                .ground_truth
+                .filter(|t| self.localizer.coarse_success(t, self.order))
+                .map(|_| Stop::CoarseSuccess)?,
+            Termination::ActionLimit => return None,
+        };
         if self.params.min_observability > 0.0
             && self
                 .observability()
@@ -274,20 +307,25 @@ impl Pipeline {
         Some(stop)
     }
 
-    /// The termination rule on the belief alone.
-    fn belief_says_stop(&self) -> Option<Stop> {
-        match self.params.termination {
-            Termination::Oracle => self
-                .params
-                .ground_truth
-                .filter(|t| self.localizer.coarse_success(t, self.order))
-                .map(|_| Stop::CoarseSuccess),
-            Termination::Confident => self
-                .stop_risk_estimate()
-                .filter(|&risk| risk < self.params.stop_risk)
-                .map(|_| Stop::Confident),
-            Termination::ActionLimit => None,
+    /// Keeps the current moment as the episode's answer when its estimated risk is the
+    /// lowest so far (strictly: of equal risks the earlier moment stays).
+    fn remember_if_best(&mut self, risk: f32) {
+        let Some((_, refinement)) = self.last_refinement else {
+            return;
+        };
+        if self.best_answer.is_some_and(|b| b.risk <= risk) {
+            return;
         }
+        let Some(cell) = self.localizer.argmax() else {
+            return;
+        };
+        self.best_answer = Some(Answer {
+            risk,
+            cell,
+            refinement,
+            observability: self.observability(),
+            readings: self.observations.len() as u16,
+        });
     }
 
     /// What the calibrated stop looks at ([`crate::stop`]); `None` before the belief's peak
@@ -414,7 +452,42 @@ impl Pipeline {
     }
 
     /// Ends the episode: the coarse estimate and its refinement.
+    ///
+    /// A confident episode that reached its action limit without stopping answers with its
+    /// lowest-risk moment when that moment's risk is below the end's (or the end has no
+    /// estimate): a later reading can move the argmax to a neighbouring cell while the
+    /// refined pose stays put (heading quantisation, `docs/EVALUATION.md`), and the
+    /// instrument should then report the answer it trusted most, not its last.
     pub fn finish(&self, plan: &FloorPlan) -> PipelineResult {
+        let end = self.finish_at_end(plan);
+        match self.best_answer {
+            Some(b)
+                if self.params.termination == Termination::Confident
+                    && *plan == self.plan
+                    && end.stop_risk.is_none_or(|r| b.risk < r) =>
+            {
+                let grid = self.localizer.grid();
+                PipelineResult {
+                    coarse: Some(grid.pose_of(b.cell)),
+                    refined: Some(b.refinement.registration),
+                    refinement: Some(b.refinement),
+                    stop_risk: Some(b.risk),
+                    registration_error: None,
+                    recognised: self
+                        .params
+                        .ground_truth
+                        .map(|t| grid.coarse_success(b.cell, &t, self.order)),
+                    symmetry_order: self.order,
+                    observability: b.observability,
+                    answer_readings: b.readings,
+                }
+            }
+            _ => end,
+        }
+    }
+
+    /// [`Pipeline::finish`] on the readings as they are at the end.
+    fn finish_at_end(&self, plan: &FloorPlan) -> PipelineResult {
         let coarse = if self.voted {
             self.localizer.estimate()
         } else {
@@ -443,6 +516,7 @@ impl Pipeline {
             recognised,
             symmetry_order: self.order,
             observability: self.observability(),
+            answer_readings: self.observations.len() as u16,
         }
     }
 
@@ -607,6 +681,68 @@ pub(crate) mod tests {
         assert_eq!(p.should_stop(), Some(Stop::CoarseSuccess));
         p.params.min_observability = 2.0 * o.min_eigenvalue;
         assert_eq!(p.should_stop(), None);
+    }
+
+    /// A confident episode that never gets sure enough to stop answers with its lowest-risk
+    /// moment when the end is riskier; an action-limit episode answers with its end.
+    #[test]
+    fn an_unsure_confident_episode_answers_with_its_lowest_risk_moment() {
+        let plan = l_room();
+        let truth = Pose2::new(0.9, -0.4, 2.0);
+        let mut params = PipelineParams {
+            rot_bins: 10,
+            known_heading: None,
+            ground_truth: Some(truth),
+            termination: Termination::Confident,
+            registration_seed: 5,
+            min_observability: 0.0,
+            stop_risk: 1e-9,
+        };
+        let readings = |k: usize| {
+            let bearing = k as f32 * 0.77;
+            let hit = plan
+                .ray_cast(truth.translation(), unit(truth.theta + bearing))
+                .unwrap();
+            // Every third range from the fifth on is an outlier: the risk goes up and down.
+            let range = if k >= 4 && k % 3 == 1 {
+                0.55 * hit.range
+            } else {
+                hit.range
+            };
+            (bearing, range)
+        };
+        let mut p = Pipeline::new_empty();
+        p.start(&plan, &params).unwrap();
+        let mut lowest: Option<(f32, usize)> = None;
+        let n = 14;
+        for k in 0..n {
+            let (bearing, range) = readings(k);
+            assert!(p.measure(bearing, range));
+            assert_eq!(p.should_stop(), None, "a 1e-9 risk never stops");
+            if let Some(r) = p.stop_risk_estimate() {
+                if lowest.is_none_or(|(l, _)| r < l) {
+                    lowest = Some((r, k + 1));
+                }
+            }
+        }
+        let (low, at) = lowest.expect("the gate opened");
+        let end = p.stop_risk_estimate();
+        assert!(
+            end.is_none_or(|e| low < e) && at < n,
+            "the readings make an earlier moment the safest: {low} at {at}, end {end:?}"
+        );
+        let r = p.finish(&plan);
+        assert_eq!((r.stop_risk, r.answer_readings), (Some(low), at as u16));
+
+        // The same readings to the action limit answer with the end.
+        params.termination = Termination::ActionLimit;
+        p.start(&plan, &params).unwrap();
+        for k in 0..n {
+            let (bearing, range) = readings(k);
+            assert!(p.measure(bearing, range));
+            assert_eq!(p.should_stop(), None);
+        }
+        assert_eq!(p.finish(&plan).answer_readings, n as u16);
     }
 
     /// The calibrated stop on noise-free readings: it stops by itself, on a pose that

@@ -216,6 +216,11 @@ pub struct Outcome {
     /// ([`activesense_core::pipeline::PipelineResult::stop_risk`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stop_risk: Option<f32>,
+    /// Ranges the answer is based on ([`PipelineResult::answer_readings`]): fewer than
+    /// were taken when a confident episode reached its action limit and answered with its
+    /// lowest-risk moment.
+    #[serde(default)]
+    pub answer_readings: u16,
 }
 
 /// A complete episode.
@@ -396,6 +401,7 @@ pub fn score(plan: &FloorPlan, truth: &Pose2, result: &PipelineResult) -> Outcom
         // the coarse estimate, and that is what gets scored.
         pose_error: result.best().map(err),
         stop_risk: result.stop_risk,
+        answer_readings: result.answer_readings,
         registration_note: result.registration_error.map(|e| {
             if result.coarse.is_some() {
                 format!("registration not possible ({e:?}); coarse estimate used")

@@ -728,6 +728,13 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
             activesense_core::stop::GATE_PEAK_MASS
         ),
     }
+    let readings = t.steps.iter().filter(|s| s.range.is_some()).count();
+    if (o.answer_readings as usize) < readings {
+        println!(
+            "answer from the lowest-risk moment, after reading {} of {}: the action limit came before a confident stop",
+            o.answer_readings, readings
+        );
+    }
     if let Some(path) = &a.json {
         // The inspection arrays (K × 900 floats per step) are written compactly.
         let text = if t.inspection.is_some() {
