@@ -1,0 +1,108 @@
+//! What a no-ground-truth stop could reach (docs/EVALUATION.md, "Calibrated stop").
+//!
+//! Runs heuristic-1 on the first N test plans to the action limit and records, after every
+//! reading, whether the belief argmax is a coarse success and the calibrated stop's risk
+//! estimate. From those traces it replays the confident rule for several stop risks P, with
+//! the episode answering at the action limit either with its last belief or with its
+//! lowest-risk moment (what `Pipeline::finish` does), next to the fraction of episodes whose
+//! argmax was right at *some* reading (what the oracle rule can catch).
+//!
+//! ```sh
+//! cargo run --release -p activesense-sim --example stop_trace -- 300 10   # plans, rotation bins
+//! ```
+
+use activesense_core::agents::{AgentKind, BaselineAgent};
+use activesense_core::pipeline::Termination;
+use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
+use activesense_sim::plans::TEST_SEEDS;
+use rayon::prelude::*;
+
+/// After one reading: readings so far, argmax right, risk estimate.
+struct Point {
+    readings: usize,
+    right: bool,
+    risk: Option<f32>,
+}
+
+fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
+    let mut spec = EpisodeSpec::new(TEST_SEEDS.start + plan, AgentKind::Heuristic1);
+    spec.rot_bins = rot_bins;
+    spec.termination = Termination::ActionLimit;
+    let mut agent = BaselineAgent::new(spec.agent, spec.agent_seed());
+    let mut points = Vec::new();
+    let mut min_readings = 0;
+    run_episode_observed(&spec, &mut agent, &mut |v| {
+        let pipe = v.runner.pipeline();
+        let n = pipe.observations().len();
+        min_readings = pipe.min_measurements();
+        if !pipe.has_belief() || points.last().is_some_and(|p: &Point| p.readings == n) {
+            return;
+        }
+        points.push(Point {
+            readings: n,
+            right: pipe
+                .localizer()
+                .coarse_success(v.truth, pipe.symmetry_order()),
+            risk: pipe.stop_risk_estimate(),
+        });
+    });
+    (points, min_readings)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let plans: u32 = args.get(1).map_or(300, |s| s.parse().expect("plans"));
+    let rot_bins: u8 = args
+        .get(2)
+        .map_or(10, |s| s.parse().expect("rotation bins"));
+    eprintln!("tracing heuristic-1 on {plans} test plans, K = {rot_bins}, to the action limit");
+    let traces: Vec<(Vec<Point>, usize)> = (0..plans)
+        .into_par_iter()
+        .map(|i| trace(i, rot_bins))
+        .collect();
+    let n = traces.len().max(1) as f32;
+    let ever_right = traces
+        .iter()
+        .filter(|(t, m)| t.iter().any(|p| p.right && p.readings >= *m))
+        .count();
+    println!(
+        "argmax right at some reading (what the oracle can catch): {:.3}",
+        ever_right as f32 / n
+    );
+    println!("| P | stopped | wrong stops | recognition, last belief | recognition, lowest-risk moment |");
+    println!("|---|---|---|---|---|");
+    for p in [0.005f32, 0.01, 0.02, 0.03, 0.05, 0.1] {
+        let (mut stops, mut wrong, mut last, mut lowest) = (0, 0, 0, 0);
+        for (t, m) in &traces {
+            let eligible = || t.iter().filter(|q| q.readings >= *m);
+            if let Some(stop) = eligible().find(|q| q.risk.is_some_and(|r| r < p)) {
+                stops += 1;
+                wrong += usize::from(!stop.right);
+                last += usize::from(stop.right);
+                lowest += usize::from(stop.right);
+                continue;
+            }
+            let end = t.last();
+            last += usize::from(end.is_some_and(|q| q.right));
+            // The first of the lowest risks, unless the end's is no higher (Pipeline::finish).
+            let best =
+                eligible()
+                    .filter(|q| q.risk.is_some())
+                    .fold(None::<&Point>, |b, q| match b {
+                        Some(b) if b.risk <= q.risk => Some(b),
+                        _ => Some(q),
+                    });
+            let answer = match (best, end) {
+                (Some(b), Some(e)) if e.risk.is_none_or(|r| b.risk.is_some_and(|br| br < r)) => b,
+                (_, Some(e)) => e,
+                _ => continue,
+            };
+            lowest += usize::from(answer.right);
+        }
+        println!(
+            "| {p} | {stops} | {wrong} | {:.3} | {:.3} |",
+            last as f32 / n,
+            lowest as f32 / n
+        );
+    }
+}
