@@ -683,21 +683,26 @@ pub(crate) mod tests {
         assert_eq!(p.should_stop(), None);
     }
 
-    /// A confident episode that never gets sure enough to stop answers with its lowest-risk
-    /// moment when the end is riskier; an action-limit episode answers with its end.
-    #[test]
-    fn an_unsure_confident_episode_answers_with_its_lowest_risk_moment() {
-        let plan = l_room();
-        let truth = Pose2::new(0.9, -0.4, 2.0);
-        let mut params = PipelineParams {
+    /// Confident termination at K = 10 with the truth known (for scoring) and stop risk `p`.
+    fn confident_params(truth: Pose2, p: f32) -> PipelineParams {
+        PipelineParams {
             rot_bins: 10,
             known_heading: None,
             ground_truth: Some(truth),
             termination: Termination::Confident,
             registration_seed: 5,
             min_observability: 0.0,
-            stop_risk: 1e-9,
-        };
+            stop_risk: p,
+        }
+    }
+
+    /// A confident episode that never gets sure enough to stop answers with its lowest-risk
+    /// moment when the end is riskier; an action-limit episode answers with its end.
+    #[test]
+    fn an_unsure_confident_episode_answers_with_its_lowest_risk_moment() {
+        let plan = l_room();
+        let truth = Pose2::new(0.9, -0.4, 2.0);
+        let mut params = confident_params(truth, 1e-9);
         let readings = |k: usize| {
             let bearing = k as f32 * 0.77;
             let hit = plan
@@ -751,15 +756,7 @@ pub(crate) mod tests {
     fn confident_stop_follows_the_stop_risk() {
         let plan = l_room();
         let truth = Pose2::new(0.9, -0.4, 2.0);
-        let params = PipelineParams {
-            rot_bins: 10,
-            known_heading: None,
-            ground_truth: Some(truth),
-            termination: Termination::Confident,
-            registration_seed: 5,
-            min_observability: 0.0,
-            stop_risk: DEFAULT_STOP_RISK,
-        };
+        let params = confident_params(truth, DEFAULT_STOP_RISK);
         let mut p = Pipeline::new_empty();
         p.start(&plan, &params).unwrap();
         let mut stopped = false;
