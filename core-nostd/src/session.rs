@@ -420,6 +420,8 @@ impl Controller {
             trace_hash: r.trace.value(),
             coarse: None,
             refined: None,
+            stop_risk: None,
+            answer_readings: 0,
             cycles: r.cycles,
         }
     }
@@ -497,6 +499,8 @@ impl Controller {
                     rep.coarse = result.coarse;
                     rep.refined = result.refined.map(|x| x.pose);
                     rep.recognised = result.recognised;
+                    rep.stop_risk = result.stop_risk;
+                    rep.answer_readings = result.answer_readings;
                 }
                 Some(Step::Done(rep))
             }
@@ -1447,6 +1451,8 @@ mod tests {
             coarse: Some(Pose2::new(1.0, 2.0, 3.0)),
             refined: Some(Pose2::new(1.0, 2.0, 3.0)),
             recognised: Some(true),
+            stop_risk: Some(f32::MAX),
+            answer_readings: u16::MAX,
             cycles: EpisodeCycles {
                 vote: max_stats,
                 rotation: max_stats,

@@ -25,7 +25,7 @@ use heapless::{String as HString, Vec as HVec};
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 /// Protocol version; bumped on every incompatible change of a message or of the framing.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 /// The id carried by device replies to frames whose own id could not be read.
 pub const NO_ID: u16 = 0;
 /// Largest CRC-protected payload (postcard bytes + 4 CRC bytes).
@@ -413,6 +413,14 @@ pub struct EpisodeReport {
     pub refined: Option<Pose2>,
     /// Coarse success against the ground truth, when one was supplied.
     pub recognised: Option<bool>,
+    /// The calibrated stop's estimate of P(wrong registration) for this answer
+    /// ([`crate::pipeline::PipelineResult::stop_risk`]; `None` below the stop gate or when the
+    /// refined pose and the argmax disagree). Since protocol v5.
+    pub stop_risk: Option<f32>,
+    /// Returned ranges the answer is based on: all of them, or fewer when a confident episode
+    /// reached its action limit and answers with its lowest-risk moment
+    /// ([`crate::pipeline::PipelineResult::answer_readings`]). Since protocol v5.
+    pub answer_readings: u16,
     /// Cycle statistics of this episode's updates and of its end-of-episode chain.
     pub cycles: EpisodeCycles,
 }

@@ -254,7 +254,7 @@ fn print_run(
     };
     println!(
         "{label}: {:?} after {} actions ({} measurements, {} no-return, {} rotations), cost {:.3}, \
-         coarse {}, refined {}{}, pose error {}, trace {:08x}, cycles/update mean {} max {} (vote mean {}, rotation mean {}), finish {}",
+         coarse {}, refined {}{}, pose error {}, stop risk {}{}, trace {:08x}, cycles/update mean {} max {} (vote mean {}, rotation mean {}), finish {}",
         r.end,
         r.actions,
         r.measurements,
@@ -271,6 +271,17 @@ fn print_run(
         match err {
             Some((e, which)) => format!("{e:.4} m ({which})"),
             None => "none".to_string(),
+        },
+        r.stop_risk
+            .map_or_else(|| "n/a".to_string(), |p| format!("{:.2} %", 100.0 * p)),
+        if r.answer_readings < r.measurements.saturating_sub(r.no_returns) {
+            format!(
+                " (answer from reading {} of {}: the lowest-risk moment)",
+                r.answer_readings,
+                r.measurements.saturating_sub(r.no_returns)
+            )
+        } else {
+            String::new()
         },
         r.trace_hash,
         mean_cycles(&r.cycles.updates()),

@@ -11,7 +11,7 @@ use activesense_core::floorplan::PlanError;
 use activesense_core::pipeline::Termination;
 use activesense_core::wire::*;
 use activesense_sim::device::sim_episode;
-use activesense_sim::episode::{EndReason, EpisodeSpec};
+use activesense_sim::episode::{EndReason, EpisodeSpec, Trajectory};
 use activesense_sim::learn::agent::{run_agent_episode, Int8Policy, Policies};
 use activesense_sim::link::{Client, LinkError};
 use activesense_sim::plans::TEST_SEEDS;
@@ -52,19 +52,18 @@ pub fn confident_stop(stop_risk: f32, min_observability: f32) -> impl Fn(&mut Ep
     }
 }
 
-/// The host's own episode for `s` (baseline, or the int8 policy built into the firmware):
-/// its actions.
-pub fn host_actions(s: &EpisodeSpec) -> Vec<Action> {
+/// The host's own episode for `s` (baseline, or the int8 policy built into the firmware).
+pub fn host_episode(s: &EpisodeSpec) -> Trajectory {
     let mut policies = Policies::default();
     policies
         .load_int8(&[], &[s.rot_bins])
         .expect("built-in int8 policies");
-    run_agent_episode(s, &policies)
-        .expect("host episode")
-        .steps
-        .iter()
-        .map(|st| st.action)
-        .collect()
+    run_agent_episode(s, &policies).expect("host episode")
+}
+
+/// The actions of [`host_episode`].
+pub fn host_actions(s: &EpisodeSpec) -> Vec<Action> {
+    host_episode(s).steps.iter().map(|st| st.action).collect()
 }
 
 /// As [`check_episodes`], with `adjust` applied to each episode's [`spec`] (termination,
@@ -138,6 +137,17 @@ pub fn check_episodes_with<T: Read + Write>(
             run.report.recognised,
             Some(traj.outcome.recognised),
             "episode {i}: recognised"
+        );
+        assert_eq!(
+            (
+                run.report.stop_risk.map(f32::to_bits),
+                run.report.answer_readings
+            ),
+            (
+                traj.outcome.stop_risk.map(f32::to_bits),
+                traj.outcome.answer_readings
+            ),
+            "episode {i}: stop risk and the readings the answer is based on"
         );
         assert!(
             run.report.coarse.is_some(),

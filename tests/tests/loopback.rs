@@ -6,7 +6,8 @@ use activesense_core::wire::Phase;
 use activesense_sim::device::{serve_std, Pipe, HOST_DEVICE};
 use activesense_sim::link::{self, Client, LinkSpec};
 use activesense_tests::{
-    check_episodes, check_episodes_with, confident_stop, fault_suite, host_actions, spec,
+    check_episodes, check_episodes_with, confident_stop, fault_suite, host_actions, host_episode,
+    spec,
 };
 use std::time::Duration;
 
@@ -47,6 +48,30 @@ fn loopback_confident_stop_rule_matches_host() {
         "τ = {MIN_OBSERVABILITY} changed no episode"
     );
     l.close().unwrap();
+}
+
+/// A confident episode that never gets sure enough to stop (P = 1e-6) answers with its
+/// lowest-risk moment; protocol v5 reports its risk and readings, and the device's answer
+/// equals the host's (checked in [`check_episodes_with`]).
+#[test]
+fn loopback_unstopped_confident_episodes_answer_alike() {
+    const EPISODES: u32 = 6;
+    let adjust = confident_stop(1e-6, 0.0);
+    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    l.client.hello().unwrap();
+    assert!(check_episodes_with(&mut l.client, EPISODES, 10, &adjust) > 0);
+    l.close().unwrap();
+    // The earlier answer is exercised: some episode answers before its last reading.
+    let earlier = (0..EPISODES)
+        .filter(|&i| {
+            let mut s = spec(i, 10);
+            adjust(&mut s);
+            let t = host_episode(&s);
+            let returned = t.steps.iter().filter(|st| st.range.is_some()).count();
+            (t.outcome.answer_readings as usize) < returned
+        })
+        .count();
+    assert!(earlier > 0, "no episode answered before its last reading");
 }
 
 #[test]
