@@ -267,6 +267,8 @@ impl Pipeline {
         self.voted = true;
         // Capacity = the protocol's action limit (asserted at compile time in `runner`).
         let _ = self.observations.push(Measurement::new(bearing, range));
+        // Coarse-to-fine: the belief argmax decided among its neighbours with finer headings.
+        self.localizer.refine_argmax(self.observations.readings());
         true
     }
 

@@ -204,6 +204,14 @@ impl Observations {
         Ok(())
     }
 
+    /// The `(bearing, range)` pairs back, recovered from the stored scene points (libm, so
+    /// the host and the instrument recover the same bits).
+    pub fn readings(&self) -> impl Iterator<Item = (f32, f32)> + Clone + '_ {
+        self.pts
+            .iter()
+            .map(|p| (crate::math::atan2(p.d.y, p.d.x), p.s.norm()))
+    }
+
     /// Number of observations.
     pub fn len(&self) -> usize {
         self.pts.len()

@@ -79,6 +79,8 @@ const _: () = assert!(
     TRACKED_SUB_BINS == 4,
     "for_each_level walks four slot layers"
 );
+/// Heading hypotheses per bin of the coarse-to-fine re-vote ([`GhtLocalizer::refine_argmax`]).
+pub const FINE_SUB_BINS: u8 = 32;
 /// Vote quantum: a measurement adds `round(w·VOTE_QUANTA)` (`w ∈ [0, 1]`) to a slot.
 pub const VOTE_QUANTA: u8 = 16;
 
@@ -130,6 +132,8 @@ pub struct GhtLocalizer {
     staged: [u16; MAX_LAYER_CELLS],
     updates: u32,
     ready: bool,
+    /// The fine argmax ([`GhtLocalizer::refine_argmax`]) and the update count it saw.
+    fine: Option<(u32, CellIndex)>,
 }
 
 impl GhtLocalizer {
@@ -153,6 +157,7 @@ impl GhtLocalizer {
             staged: [0; MAX_LAYER_CELLS],
             updates: 0,
             ready: false,
+            fine: None,
         }
     }
 
@@ -210,6 +215,7 @@ impl GhtLocalizer {
         self.amax = 0;
         self.total = 0.0;
         self.updates = 0;
+        self.fine = None;
         self.z = self.normaliser();
     }
 
@@ -339,6 +345,7 @@ impl GhtLocalizer {
             subs,
             bearing,
             range,
+            None,
         )
     }
 
@@ -374,6 +381,81 @@ impl GhtLocalizer {
         self.updates += 1;
         self.z = self.normaliser();
         Ok(stats)
+    }
+
+    /// Coarse-to-fine argmax (`K > 1`): re-votes `readings` (all committed `(bearing, range)`
+    /// pairs) with [`FINE_SUB_BINS`] heading hypotheses per bin, for the 3 × 3 cells and the 3
+    /// bins around [`GhtLocalizer::coarse_argmax`] only, and keeps the best of those cells
+    /// (its best heading summed over the readings; the coarse argmax on ties) as
+    /// [`GhtLocalizer::argmax`] until the next update.
+    ///
+    /// Why: the accumulator tracks 4 headings per 36° bin, and a heading up to 4.5° off
+    /// shifts a reading's vote by up to `r·0.08` m, so the argmax often lands in the cell
+    /// next to the truth (docs/localization.md). Eight tracked headings fixed that in
+    /// episodes but need 36 KB more RAM; the fine re-vote needs none (the scratch layer and
+    /// 1.7 KB of stack) and costs `3 · FINE_SUB_BINS` windowed votes per reading.
+    pub fn refine_argmax(&mut self, readings: impl Iterator<Item = (f32, f32)> + Clone) {
+        self.fine = None;
+        if self.grid.rot_bins <= 1 {
+            return;
+        }
+        let Some(c0) = self.coarse_argmax() else {
+            return;
+        };
+        let mut cfg = self.cfg;
+        cfg.sub_bins = FINE_SUB_BINS;
+        let l = self.grid.layer_len();
+        let (nx, ny) = (self.grid.nx as i32, self.grid.ny as i32);
+        let (cx, cy) = (c0.ix as i32, c0.iy as i32);
+        let k = self.grid.rot_bins as i32;
+        let bins = [0i32, -1, 1].map(|d| (c0.bin as i32 + d).rem_euclid(k) as u8);
+        // Summed quanta per (bin, fine heading, window cell).
+        let mut sums = [[[0u32; 9]; FINE_SUB_BINS as usize]; 3];
+        for (bearing, range) in readings {
+            for (b, &bin) in bins.iter().enumerate() {
+                for f in 0..FINE_SUB_BINS {
+                    vote_layer(
+                        &self.grid,
+                        &cfg,
+                        &self.rtable,
+                        &self.interior,
+                        &self.kernel,
+                        &mut self.scratch[..l],
+                        bin,
+                        (f, f + 1),
+                        bearing,
+                        range,
+                        Some((cx, cy)),
+                    );
+                    for (w, sum) in sums[b][f as usize].iter_mut().enumerate() {
+                        let (x, y) = (cx + w as i32 % 3 - 1, cy + w as i32 / 3 - 1);
+                        if x >= 0 && y >= 0 && x < nx && y < ny {
+                            *sum += self.scratch[(y * nx + x) as usize] as u32;
+                        }
+                    }
+                }
+            }
+        }
+        let mut best = (0u32, c0);
+        for (b, &bin) in bins.iter().enumerate() {
+            for w in 0..9 {
+                let (x, y) = (cx + w as i32 % 3 - 1, cy + w as i32 / 3 - 1);
+                if x < 0 || y < 0 || x >= nx || y >= ny || !self.interior[(y * nx + x) as usize] {
+                    continue;
+                }
+                let v = sums[b].iter().map(|h| h[w]).max().unwrap_or(0);
+                let c = CellIndex {
+                    ix: x as u8,
+                    iy: y as u8,
+                    bin,
+                };
+                // The coarse argmax (first in this order) keeps ties.
+                if v > best.0 || (c == c0 && v == best.0) {
+                    best = (v, c);
+                }
+            }
+        }
+        self.fine = Some((self.updates, best.1));
     }
 
     /// Evaluates a hypothetical measurement without committing it: the entropy the belief
@@ -541,8 +623,17 @@ impl GhtLocalizer {
         Ok(n)
     }
 
-    /// The most voted cell (first on ties); `None` before any vote.
+    /// The belief argmax: the fine argmax when [`GhtLocalizer::refine_argmax`] ran after the
+    /// last update, else [`GhtLocalizer::coarse_argmax`]; `None` before any vote.
     pub fn argmax(&self) -> Option<CellIndex> {
+        match self.fine {
+            Some((seen, c)) if seen == self.updates && self.ready && self.total > 0.0 => Some(c),
+            _ => self.coarse_argmax(),
+        }
+    }
+
+    /// The most voted cell of the accumulator (first on ties); `None` before any vote.
+    pub fn coarse_argmax(&self) -> Option<CellIndex> {
         if !self.ready || self.total <= 0.0 {
             return None;
         }
@@ -671,6 +762,7 @@ fn vote_layer(
     subs: (u8, u8),
     bearing: f32,
     range: f32,
+    window: Option<(i32, i32)>,
 ) -> u32 {
     scratch.fill(0);
     let nx = grid.nx as i32;
@@ -716,6 +808,13 @@ fn vote_layer(
             let (cx, cy) = (fx as i32, fy as i32);
             if !interior[(cy * nx + cx) as usize] {
                 continue;
+            }
+            // A vote reaches cells within `spread` of its own: one that cannot reach the
+            // 3 × 3 window around `window` is skipped (the window's values stay exact).
+            if let Some((wx, wy)) = window {
+                if (cx - wx).abs() > spread + 1 || (cy - wy).abs() > spread + 1 {
+                    continue;
+                }
             }
             votes += 1;
             // Algorithm 2: weighted vote into the neighbourhood.
