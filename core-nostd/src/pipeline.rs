@@ -126,13 +126,14 @@ pub enum Stop {
 /// The pipeline's answer at the end of an episode.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PipelineResult {
-    /// Belief argmax (AgentPose), once any vote landed.
+    /// Belief argmax (AgentPose), once any vote landed; under the confident stop, the
+    /// cell the refined pose lies in when there is one ([`Pipeline::answer_cell`]).
     pub coarse: Option<Pose2>,
     /// The refined registration, when at least two measurements allowed one.
     pub refined: Option<Registration>,
     /// Why there is no refined pose, if there is none.
     pub registration_error: Option<RegistrationError>,
-    /// Coarse success against the ground truth, when one was supplied.
+    /// Coarse success of `coarse` against the ground truth, when one was supplied.
     pub recognised: Option<bool>,
     /// Cyclic symmetry order of the plan.
     pub symmetry_order: u8,
@@ -142,7 +143,7 @@ pub struct PipelineResult {
     /// its registration is `refined`.
     pub refinement: Option<Refinement>,
     /// The calibrated stop's estimate of P(wrong) at the end ([`Pipeline::stop_risk_estimate`]);
-    /// `None` below the stop gate or when the refined pose and the argmax disagree.
+    /// `None` below the stop gate.
     pub stop_risk: Option<f32>,
     /// Readings the answer (`coarse`, `refined`, `recognised`, `stop_risk`) is based on: all
     /// of them, except when a confident episode reached its action limit without stopping
@@ -318,7 +319,7 @@ impl Pipeline {
         if self.best_answer.is_some_and(|b| b.risk <= risk) {
             return;
         }
-        let Some(cell) = self.localizer.argmax() else {
+        let Some(cell) = self.answer_cell(&refinement) else {
             return;
         };
         self.best_answer = Some(Answer {
@@ -334,9 +335,18 @@ impl Pipeline {
     /// mass reaches [`stop::GATE_PEAK_MASS`], before [`Pipeline::min_measurements`], or when
     /// the readings do not register.
     pub fn stop_features(&self) -> Option<StopFeatures> {
+        self.stop_point().map(|(f, _)| f)
+    }
+
+    /// [`Pipeline::stop_features`] together with the cell the stop would answer with
+    /// ([`Pipeline::answer_cell`]), from one refinement (the calibration's label).
+    pub fn stop_point(&self) -> Option<(StopFeatures, CellIndex)> {
         let peak_mass = self.stop_gate()?;
         let refined = self.refine(&self.plan).ok()?;
-        self.features_of(peak_mass, &refined)
+        Some((
+            self.features_of(peak_mass, &refined)?,
+            self.answer_cell(&refined)?,
+        ))
     }
 
     /// The belief's peak mass when the stop gate is open (enough readings, peak mass at
@@ -353,6 +363,7 @@ impl Pipeline {
     fn features_of(&self, peak_mass: f32, refined: &Refinement) -> Option<StopFeatures> {
         let grid = self.localizer.grid();
         let argmax = self.localizer.argmax()?;
+        let answer = self.answer_cell(refined)?;
         let coarse = grid.pose_of(argmax);
         let pose = refined.registration.pose;
         let offset_cells = ((pose.x - coarse.x) / grid.cell[0])
@@ -374,7 +385,7 @@ impl Pipeline {
             offset_cells,
             offset_bins,
             edge_margin: {
-                let lo = grid.cell_centre(argmax.ix as usize, argmax.iy as usize);
+                let lo = grid.cell_centre(answer.ix as usize, answer.iy as usize);
                 let (hx, hy) = (0.5 * grid.cell[0], 0.5 * grid.cell[1]);
                 (hx - crate::math::abs(pose.x - lo.x)).min(hy - crate::math::abs(pose.y - lo.y))
             },
@@ -384,17 +395,24 @@ impl Pipeline {
         })
     }
 
-    /// The calibrated estimate of the probability that the belief argmax is wrong
-    /// ([`StopModel::for_rot_bins`] on [`Pipeline::stop_features`]); `None` when there are
-    /// no features yet or the refined pose does not agree with the argmax
-    /// ([`StopFeatures::agrees`]: then the episode does not stop).
+    /// The calibrated estimate of the probability that the answer is wrong: that the cell
+    /// the refined pose lies in is not a coarse success ([`StopModel::for_rot_bins`] on
+    /// [`Pipeline::stop_features`]); `None` when there are no features yet.
     pub fn stop_risk_estimate(&self) -> Option<f32> {
-        self.risk_of(&self.stop_features()?)
+        Some(self.risk_of(&self.stop_features()?))
     }
 
-    fn risk_of(&self, f: &StopFeatures) -> Option<f32> {
-        f.agrees
-            .then(|| StopModel::for_rot_bins(self.params.rot_bins).risk(f))
+    fn risk_of(&self, f: &StopFeatures) -> f32 {
+        StopModel::for_rot_bins(self.params.rot_bins).risk(f)
+    }
+
+    /// The cell the confident stop answers with: the one the refined pose lies in (`None`
+    /// when it left the grid). The refinement overrules the belief argmax where the two
+    /// disagree, and is right far more often there ([`crate::stop`]).
+    pub fn answer_cell(&self, refined: &Refinement) -> Option<CellIndex> {
+        self.localizer
+            .grid()
+            .cell_of_pose(&refined.registration.pose)
     }
 
     /// Fewest measurements before the episode may stop: as many as the registration has
@@ -507,8 +525,22 @@ impl Pipeline {
         // The stop estimate at the end, from the same refinement (no second one).
         let stop_risk = refined.as_ref().and_then(|r| {
             let f = self.features_of(self.stop_gate()?, r)?;
-            self.risk_of(&f)
+            Some(self.risk_of(&f))
         });
+        // The confident stop answers with the refined pose's cell (`Pipeline::answer_cell`).
+        let answer = refined
+            .as_ref()
+            .filter(|_| self.params.termination == Termination::Confident)
+            .and_then(|r| self.answer_cell(r));
+        let (coarse, recognised) = match answer {
+            Some(cell) => (
+                Some(self.localizer.grid().pose_of(cell)),
+                self.params
+                    .ground_truth
+                    .map(|t| self.localizer.grid().coarse_success(cell, &t, self.order)),
+            ),
+            None => (coarse, recognised),
+        };
         PipelineResult {
             coarse,
             refined: refined.map(|r| r.registration),

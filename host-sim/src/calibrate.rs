@@ -3,7 +3,8 @@
 //! Episodes of several agents run on calibration plans (generated seeds from
 //! `--first-seed`, far from the test set) to the action limit. After every returned range
 //! whose belief passes the stop gate, the pipeline's [`StopFeatures`] are recorded with the
-//! label "the belief argmax is wrong" (recorded only where the refined pose agrees with the argmax: the stop considers no other point) (not a coarse success against the truth). A logistic
+//! label "the answer is wrong": the cell the refined pose lies in is not a coarse success
+//! against the truth ([`activesense_core::pipeline::Pipeline::answer_cell`]). A logistic
 //! regression per rotation setting (Newton–Raphson / IRLS in f64 with a small ridge) is
 //! fitted on the even-indexed plans and checked on the odd-indexed ones: the reliability
 //! of its estimate at every step, and what the stop rule "stop at the first step whose
@@ -97,11 +98,13 @@ pub fn collect(opts: &EvalOptions, rot_bins: u8, progress: bool) -> Vec<EpisodeS
                     return;
                 }
                 let pipe = v.runner.pipeline();
-                if let Some(features) = pipe.stop_features().filter(|f| f.agrees) {
+                // The label: is the cell the refined pose lies in (the answer) wrong?
+                if let Some((features, answer)) = pipe.stop_point() {
+                    let grid = pipe.localizer().grid();
                     samples.push(Sample {
                         plan: i,
                         features,
-                        wrong: !step.coarse_success,
+                        wrong: !grid.coarse_success(answer, v.truth, pipe.symmetry_order()),
                     });
                 }
             })
@@ -214,7 +217,7 @@ fn solve<const D: usize>(mut a: [[f64; D]; D], mut b: [f64; D]) -> Option<[f64; 
 pub struct HeldOut {
     /// Decision points.
     pub samples: usize,
-    /// Fraction of them with a wrong argmax.
+    /// Fraction of them with a wrong answer (the refined pose's cell).
     pub wrong_rate: f64,
     /// Reliability per bin of the estimated risk `[0, .005, .01, .02, .05, .1, .2, .5, 1]`:
     /// (samples, mean estimated risk, observed wrong rate).
@@ -309,11 +312,11 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
 pub fn markdown(fitted: &[Fitted], command: &str) -> String {
     let mut s = String::from("# Calibrated stop: fit and held-out check\n\n");
     s.push_str(&format!("Produced by `{command}`.\n\n"));
-    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the argmax cell's edge, fraction of bearings unexplained, repeated readings per bearing (`core-nostd/src/stop.rs`; readings and explained readings are counted per distinct bearing).\n\n");
+    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the edge of the refined pose's cell, fraction of bearings unexplained, repeated readings per bearing, refined pose and argmax disagree (`core-nostd/src/stop.rs`; readings and explained readings are counted per distinct bearing).\n\n");
     for f in fitted {
         let h = &f.held_out;
         s.push_str(&format!(
-            "## K = {}\n\nFitted on {} decision points; weights {:?}, bias {:.3}.\n\nHeld-out: {} decision points in {} episodes, {:.1} % with a wrong argmax.\n\n",
+            "## K = {}\n\nFitted on {} decision points; weights {:?}, bias {:.3}.\n\nHeld-out: {} decision points in {} episodes, {:.1} % with a wrong answer (the cell the refined pose lies in).\n\n",
             f.model.rot_bins,
             f.fit_samples,
             f.model.weights.iter().map(|w| (w * 1000.0).round() / 1000.0).collect::<Vec<_>>(),

@@ -982,8 +982,9 @@ fn stop_table(s: &mut String, report: &EvalReport, k: u8) {
     let _ = writeln!(
         s,
         "Calibrated stop (`--stop-risk {}`): how many episodes the rule stopped, how many of those stops were wrong \
-         (argmax not a coarse success), the mean estimated risk at the stops (what the rule claimed), and the episodes \
-         whose final pose is within {} cm of the truth, recognised or not.\n",
+         (the answer, the cell the refined pose lies in, not a coarse success), the mean estimated risk at the stops \
+         (what the rule claimed), and the episodes whose final pose is within {} cm of the truth, recognised or not. \
+         Recognition here scores that answer; oracle-terminated runs score the belief argmax.\n",
         report.options.config.stop_risk,
         100.0 * REGISTERED_TOLERANCE
     );
@@ -1013,7 +1014,7 @@ fn stop_table(s: &mut String, report: &EvalReport, k: u8) {
 fn reliability_table(s: &mut String, report: &EvalReport, k: u8) {
     let _ = writeln!(
         s,
-        "Reliability of the final belief's stated confidence (peak mass around the argmax) against coarse success; \
+        "Reliability of the final belief's stated confidence (peak mass around the argmax) against recognition; \
          diagram in `reliability-k{k}.svg`. ECE = expected calibration error over {RELIABILITY_BINS} bins.\n"
     );
     let _ = writeln!(
