@@ -41,7 +41,8 @@ pub enum Termination {
     /// On coarse success against the ground truth (the paper's rule; simulation only).
     Oracle,
     /// When the calibrated estimate of P(wrong registration) is below
-    /// [`PipelineParams::stop_risk`] ([`crate::stop`]); no ground truth used.
+    /// [`PipelineParams::stop_risk`] ([`crate::stop`]); no ground truth used. The answer is
+    /// the refined pose, scored by the cell it lies in ([`Pipeline::answer_cell`]).
     Confident,
     /// Never: run to the action limit.
     ActionLimit,

@@ -406,16 +406,17 @@ pub struct EpisodeReport {
     /// CRC-32 over the episode's (action, observation) stream, see [`TraceHash`].
     pub trace_hash: u32,
     /// Coarse AgentPose from the GHT localizer (the belief argmax; `None` when no
-    /// measurement returned).
+    /// measurement returned). With `Termination::Confident`, the cell the refined pose lies
+    /// in ([`crate::pipeline::Pipeline::answer_cell`]).
     pub coarse: Option<Pose2>,
     /// Refined AgentPose from the sparse registration (`None` with fewer than two
     /// measurements).
     pub refined: Option<Pose2>,
-    /// Coarse success against the ground truth, when one was supplied.
+    /// Coarse success of `coarse` against the ground truth, when one was supplied.
     pub recognised: Option<bool>,
     /// The calibrated stop's estimate of P(wrong registration) for this answer
-    /// ([`crate::pipeline::PipelineResult::stop_risk`]; `None` below the stop gate or when the
-    /// refined pose and the argmax disagree). Since protocol v5.
+    /// ([`crate::pipeline::PipelineResult::stop_risk`]; `None` below the stop gate). Since
+    /// protocol v5.
     pub stop_risk: Option<f32>,
     /// Returned ranges the answer is based on: all of them, or fewer when a confident episode
     /// reached its action limit and answers with its lowest-risk moment

@@ -208,8 +208,9 @@ struct EvalArgs {
     /// Action limit per episode.
     #[arg(long, default_value_t = EVAL_MAX_ACTIONS, value_parser = clap::value_parser!(u16).range(1..))]
     max_actions: u16,
-    /// When an episode stops: coarse success against the ground truth (the paper), or a
-    /// confident belief (no ground truth), or only the action limit.
+    /// When an episode stops: coarse success against the ground truth (the paper), or the
+    /// calibrated stop (no ground truth; it answers with the refined pose, and recognition
+    /// scores the cell that pose lies in), or only the action limit.
     #[arg(long, value_parser = parse_termination, default_value = "oracle")]
     termination: activesense_sim::episode::Termination,
     #[command(flatten)]
@@ -387,8 +388,8 @@ struct EpisodeArgs {
     episode_seed: u64,
     #[command(flatten)]
     sensor: SensorArgs,
-    /// When to stop: on coarse success against the ground truth (paper), on a confident
-    /// belief (no ground truth), or only at the action limit.
+    /// When to stop: on coarse success against the ground truth (paper), by the calibrated
+    /// stop (no ground truth; answers with the refined pose), or only at the action limit.
     #[arg(long, value_parser = parse_termination, default_value = "oracle")]
     termination: activesense_sim::episode::Termination,
     /// Write the full trajectory as JSON here.
