@@ -697,13 +697,26 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
             p.theta.to_degrees()
         )
     };
+    // Under the calibrated stop the answer is the refined pose, scored by its cell.
+    let answer_is_refined = t.spec.termination == activesense_sim::episode::Termination::Confident
+        && o.refined.is_some();
     println!(
-        "recognised: {} (room symmetry C{})",
+        "recognised: {} (room symmetry C{}{})",
         if o.recognised { "yes" } else { "no" },
-        o.symmetry_order
+        o.symmetry_order,
+        if answer_is_refined {
+            "; scored on the cell the refined pose lies in"
+        } else {
+            ""
+        }
     );
     if let (Some(c), Some(e)) = (o.coarse, o.coarse_error) {
-        println!("coarse estimate:  {}  error {:.3} m", fmt_pose(&c), e);
+        let what = if answer_is_refined {
+            "coarse estimate (the refined pose's cell):"
+        } else {
+            "coarse estimate:"
+        };
+        println!("{what}  {}  error {:.3} m", fmt_pose(&c), e);
     }
     match (&o.refined, o.pose_error) {
         (Some(r), Some(e)) => println!(
@@ -725,7 +738,7 @@ fn cmd_episode(a: EpisodeArgs) -> Result<()> {
             100.0 * t.spec.config.stop_risk
         ),
         None => println!(
-            "estimated risk of a wrong registration: not available (belief peak mass below {} or the refined pose outside the argmax cell)",
+            "estimated risk of a wrong registration: not available (belief peak mass below {}, fewer readings than unknowns, or no registration)",
             activesense_core::stop::GATE_PEAK_MASS
         ),
     }
