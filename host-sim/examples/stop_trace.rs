@@ -20,12 +20,14 @@ use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
 use activesense_sim::plans::TEST_SEEDS;
 use rayon::prelude::*;
 
-/// After one reading: readings so far, answer right, argmax right, risk estimate.
+/// After one reading: readings so far, answer right, argmax right, risk estimate, and
+/// whether the refined pose left the argmax's cell (`None` below the stop gate).
 struct Point {
     readings: usize,
     right: bool,
     argmax_right: bool,
     risk: Option<f32>,
+    overruled: Option<bool>,
 }
 
 fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
@@ -56,6 +58,7 @@ fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
             right,
             argmax_right,
             risk: pipe.stop_risk_estimate(),
+            overruled: pipe.stop_features().map(|f| !f.agrees),
         });
     });
     (points, min_readings)
@@ -107,6 +110,18 @@ fn main() {
     println!(
         "answer (refined pose's cell) right at some reading: {:.3}",
         ever(|p| p.right)
+    );
+    // Where the refinement leaves the argmax's cell, which of the two is right?
+    let overruled: Vec<&Point> = traces
+        .iter()
+        .flat_map(|(t, m)| t.iter().filter(move |q| q.readings >= *m))
+        .filter(|q| q.overruled == Some(true))
+        .collect();
+    println!(
+        "readings past the stop gate where the refined pose left the argmax's cell: {}; the refined pose's cell right in {}, the argmax in {}",
+        overruled.len(),
+        overruled.iter().filter(|q| q.right).count(),
+        overruled.iter().filter(|q| q.argmax_right).count()
     );
     // The gap at P = 0.01: right at some reading, wrong in the answer; were those right
     // readings ones with a risk estimate at all?
