@@ -196,8 +196,8 @@ pub enum EndReason {
 /// How well the episode registered the model.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Outcome {
-    /// Coarse success of `coarse` (its cell within one rotation bin of the truth or a
-    /// symmetric equivalent, in the same cell).
+    /// Coarse success of `coarse`: the truth (or a symmetric equivalent) lies in its cell,
+    /// its heading within one rotation bin.
     pub recognised: bool,
     /// Cyclic symmetry order of the room (Wolter et al., default tolerances).
     pub symmetry_order: u8,
