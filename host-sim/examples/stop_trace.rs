@@ -15,7 +15,9 @@
 //! ```
 
 use activesense_core::agents::{AgentKind, BaselineAgent};
+use activesense_core::localization::grid::CellIndex;
 use activesense_core::pipeline::Termination;
+use activesense_core::stop::StopModel;
 use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
 use activesense_sim::plans::TEST_SEEDS;
 use rayon::prelude::*;
@@ -46,20 +48,29 @@ fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
         }
         let order = pipe.symmetry_order();
         let argmax_right = pipe.localizer().coarse_success(v.truth, order);
-        // The answer: the refined pose's cell, else (nothing registers) the argmax.
-        let right = match pipe.refine(v.plan).ok().map(|r| pipe.answer_cell(&r)) {
-            Some(cell) => {
-                cell.is_some_and(|c| pipe.localizer().grid().coarse_success(c, v.truth, order))
-            }
-            None => argmax_right,
+        let right_cell = |c: CellIndex| pipe.localizer().grid().coarse_success(c, v.truth, order);
+        // Past the stop gate one refinement gives the features and the answer; below it the
+        // answer still is the refined pose's cell, else (nothing registers) the argmax.
+        let point = match pipe.stop_point() {
+            Some((f, cell)) => Point {
+                readings: n,
+                right: right_cell(cell),
+                argmax_right,
+                risk: Some(StopModel::for_rot_bins(rot_bins).risk(&f)),
+                overruled: Some(!f.agrees),
+            },
+            None => Point {
+                readings: n,
+                right: match pipe.refine(v.plan) {
+                    Ok(r) => pipe.answer_cell(&r).is_some_and(right_cell),
+                    Err(_) => argmax_right,
+                },
+                argmax_right,
+                risk: None,
+                overruled: None,
+            },
         };
-        points.push(Point {
-            readings: n,
-            right,
-            argmax_right,
-            risk: pipe.stop_risk_estimate(),
-            overruled: pipe.stop_features().map(|f| !f.agrees),
-        });
+        points.push(point);
     });
     (points, min_readings)
 }
