@@ -9,10 +9,12 @@
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
 //! cargo xtask mcu-bench [--episodes N] [--agent NAME] [--termination T]  # instructions per update / decision / registration (QEMU -icount)
 //! cargo xtask qemu-log     # the firmware's defmt log (smoke boot + one session), decoded
+//! cargo xtask reproduce [--list] [--only A,B] [--skip A,B] [--resume] [--check]  # every committed artifact
 //! ```
 
 mod fuzz;
 mod qemu_log;
+mod reproduce;
 mod size;
 
 use anyhow::{bail, Context, Result};
@@ -37,6 +39,7 @@ fn main() {
         Some("fuzz") => fuzz::run(&args[1..]),
         Some("mcu-bench") => mcu_bench(&args[1..]),
         Some("qemu-log") => qemu_log::run_task(),
+        Some("reproduce") => reproduce::run(&args[1..]),
         Some("help") | Some("--help") | Some("-h") | None => {
             print_help();
             Ok(())
@@ -65,7 +68,11 @@ fn print_help() {
          fuzz [SECS] run the cargo-fuzz targets `session` and `policy_blob` for SECS seconds each (default 60)\n  \
          mcu-bench [--episodes N] [--agent NAME] [--termination T]\n              \
          instructions per GHT update, rotation and registration on the Cortex-M4 under\n              \
-         QEMU -icount shift=0, K = 1 and K = 10, N episodes each (default 20)"
+         QEMU -icount shift=0, K = 1 and K = 10, N episodes each (default 20)\n  \
+         reproduce [--list] [--only A,B] [--skip A,B] [--resume] [--check]\n              \
+         regenerate every committed artifact in dependency order (policies, blobs, results,\n              \
+         calibration, inspection, MCU tables, sizes), each directory with a manifest.json;\n              \
+         --check regenerates the cheap ones into target/ and compares them byte for byte"
     );
 }
 
