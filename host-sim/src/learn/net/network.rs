@@ -205,6 +205,38 @@ impl PolicyNet {
         dlogits: [f32; N_ACTIONS],
         dvalue: f32,
     ) -> (Vec<f32>, Vec<f32>) {
+        self.input_maps(belief, side, dlogits, dvalue, false)
+    }
+
+    /// Guided back-propagation (Springenberg et al. 2014) of the logit of `action` to the
+    /// inputs, for one sample: the backward pass of `logits[action]` in which every ReLU
+    /// passes the gradient only where its forward output was positive *and* the incoming
+    /// gradient is positive ([`guided_relu_mask`](super::guided_relu_mask)). Returns the maps
+    /// over the belief (`K·900`, layout of the input) and over the side features. The inputs
+    /// themselves are not behind a ReLU, so the maps can hold negative values (a negative
+    /// first-layer weight); the inspection tool shows their positive part. Allocates.
+    pub fn guided_backprop(
+        &self,
+        belief: &[f32],
+        side: &[f32],
+        action: usize,
+    ) -> (Vec<f32>, Vec<f32>) {
+        assert!(action < N_ACTIONS, "action {action} out of range");
+        let mut dlogits = [0.0; N_ACTIONS];
+        dlogits[action] = 1.0;
+        self.input_maps(belief, side, dlogits, 0.0, true)
+    }
+
+    /// One sample's forward, then its backward from the output gradients down to the
+    /// inputs (no parameter gradient), plain or guided at the ReLUs.
+    fn input_maps(
+        &self,
+        belief: &[f32],
+        side: &[f32],
+        dlogits: [f32; N_ACTIONS],
+        dvalue: f32,
+        guided: bool,
+    ) -> (Vec<f32>, Vec<f32>) {
         let mut s = Scratch::new(self.shape);
         self.forward_with(belief, side, &mut s);
         let mut dbelief = vec![0.0; self.shape.belief_len()];
@@ -221,44 +253,7 @@ impl PolicyNet {
             None,
             &mut s,
             Some((&mut dbelief, &mut dside)),
-            false,
-        );
-        (dbelief, dside)
-    }
-
-    /// Guided back-propagation (Springenberg et al. 2014) of the logit of `action` to the
-    /// inputs, for one sample: the backward pass of `logits[action]` in which every ReLU
-    /// passes the gradient only where its forward output was positive *and* the incoming
-    /// gradient is positive ([`guided_relu_mask`]). Returns the maps over the belief
-    /// (`K·900`, layout of the input) and over the side features. The inputs themselves are
-    /// not behind a ReLU, so the maps can hold negative values (a negative first-layer
-    /// weight); the inspection tool shows their positive part. Allocates.
-    pub fn guided_backprop(
-        &self,
-        belief: &[f32],
-        side: &[f32],
-        action: usize,
-    ) -> (Vec<f32>, Vec<f32>) {
-        assert!(action < N_ACTIONS, "action {action} out of range");
-        let mut s = Scratch::new(self.shape);
-        self.forward_with(belief, side, &mut s);
-        let mut dbelief = vec![0.0; self.shape.belief_len()];
-        let mut dside = vec![0.0; self.shape.side];
-        let mut dlogits = [0.0; N_ACTIONS];
-        dlogits[action] = 1.0;
-        let acts = std::mem::take(&mut s.acts);
-        backward_sample(
-            &self.shape,
-            &self.params,
-            belief,
-            side,
-            &acts,
-            dlogits,
-            0.0,
-            None,
-            &mut s,
-            Some((&mut dbelief, &mut dside)),
-            true,
+            guided,
         );
         (dbelief, dside)
     }
