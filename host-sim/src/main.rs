@@ -952,34 +952,14 @@ fn cmd_bench_localization(a: BenchLocalizationArgs) -> Result<()> {
 
 #[derive(Args)]
 struct TrainArgs {
-    /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=10))]
-    rot_bins: u8,
-    /// Number of updates (each: --envs environments × --segment steps, one gradient step).
-    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
-    updates: u64,
+    // Every hyper-parameter flag (--rot-bins, --updates, --seed, --envs, ...): their
+    // defaults and help are written once, in HyperParams.
+    #[command(flatten)]
+    hp: activesense_sim::learn::train::HyperParams,
     /// Stop after this many minutes of wall time even if --updates is not reached (the
     /// result then depends on the machine's speed; --updates alone is reproducible).
     #[arg(long)]
     minutes: Option<f64>,
-    /// Master seed (network, rooms, noise, action draws).
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
-    /// Parallel environments.
-    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=1024))]
-    envs: u64,
-    /// Steps per environment per update (n-step segment).
-    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=512))]
-    segment: u64,
-    /// Warm-start updates imitating the teacher (0 = pure A2C from scratch).
-    #[arg(long, default_value_t = 200)]
-    imitation_updates: u64,
-    /// Adam learning rate.
-    #[arg(long, default_value_t = 3e-4)]
-    lr: f32,
-    /// Entropy bonus coefficient.
-    #[arg(long, default_value_t = 0.01)]
-    ent_coef: f32,
     /// Start from this policy file instead of a fresh network (fine-tuning, resuming from
     /// DIR/checkpoint.policy).
     #[arg(long)]
@@ -993,31 +973,15 @@ struct TrainArgs {
     /// Print a log line per --log-every updates instead of a progress bar.
     #[arg(long)]
     no_progress: bool,
-    /// Updates between log lines.
-    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
-    log_every: u64,
-    /// Inputs the network is shown: `full`, or the §4.4 ablations `no-scans` (topological
-    /// scans zeroed) and `no-belief` (belief map zeroed: scans and history only).
-    #[arg(long, default_value = "full", value_parser = parse_inputs)]
-    inputs: activesense_sim::learn::agent::InputMask,
-    /// Scale of the clipped quadratic registration-error reward (0 = the §4.4 ablation
-    /// without the final-registration-error term).
-    #[arg(long, default_value_t = 1.0)]
-    registration_reward: f32,
-}
-
-fn parse_inputs(s: &str) -> Result<activesense_sim::learn::agent::InputMask, String> {
-    activesense_sim::learn::agent::InputMask::from_name(s)
-        .ok_or_else(|| format!("unknown input set '{s}' (expected full, no-scans or no-belief)"))
 }
 
 fn cmd_train(a: TrainArgs) -> Result<()> {
     use activesense_sim::learn::{agent::shape_for, file, train};
     use std::io::IsTerminal;
-    if a.rot_bins != 1 && a.rot_bins != 10 {
+    if a.hp.rot_bins != 1 && a.hp.rot_bins != 10 {
         bail!(
             "--rot-bins must be 1 or 10 (the paper's two settings), got {}",
-            a.rot_bins
+            a.hp.rot_bins
         );
     }
     if let Some(n) = a.threads {
@@ -1026,26 +990,16 @@ fn cmd_train(a: TrainArgs) -> Result<()> {
             .build_global()
             .context("cannot set the thread count")?;
     }
-    let mut hp = train::HyperParams::defaults(a.rot_bins);
-    hp.seed = a.seed;
-    hp.updates = a.updates;
-    hp.num_envs = a.envs as usize;
-    hp.segment_len = a.segment as usize;
-    hp.imitation_updates = a.imitation_updates;
-    hp.learning_rate = a.lr;
-    hp.ent_coef = a.ent_coef;
-    hp.log_every = a.log_every;
-    hp.inputs = a.inputs;
-    hp.registration_reward = a.registration_reward;
+    let hp = a.hp;
     let init = match &a.init {
-        Some(p) => Some(file::load_expecting(p, a.rot_bins, shape_for(a.rot_bins).side)?.0),
+        Some(p) => Some(file::load_expecting(p, hp.rot_bins, shape_for(hp.rot_bins).side)?.0),
         None => None,
     };
     let command = command_line();
-    let shape = shape_for(a.rot_bins);
+    let shape = shape_for(hp.rot_bins);
     eprintln!(
         "training K = {}: network {} ({} parameters, {} multiply-accumulates per decision), {} threads",
-        a.rot_bins,
+        hp.rot_bins,
         activesense_sim::learn::net::ARCH_NAME,
         shape.param_count(),
         shape.macs(),

@@ -5,11 +5,12 @@
 //! be ported to the Cortex-M4); the versioned, checksummed policy file that carries a trained
 //! network from the trainer to the evaluator and the firmware ([`file`](mod@file)); the agent
 //! that plays a network behind the core's `Policy` seam ([`agent`]); the A2C trainer
-//! ([`train`]); and the post-training int8 quantisation into the blob the instrument runs
-//! ([`quantize`]).
+//! ([`train`]) and its hyper-parameters, each default written once ([`hyper`]); and the
+//! post-training int8 quantisation into the blob the instrument runs ([`quantize`]).
 
 pub mod agent;
 pub mod file;
+pub mod hyper;
 pub mod net;
 pub mod quantize;
 pub mod train;

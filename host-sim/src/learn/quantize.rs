@@ -5,7 +5,8 @@
 //! **Quantisation** (TFLite / CMSIS-NN conventions): weights symmetric per output channel
 //! (`scale = max|w| / 127`, values in `[−127, 127]`); biases int32 at `input_scale ×
 //! weight_scale[c]`; activations asymmetric per tensor, calibrated on the float network's
-//! activations over states recorded while it plays *training* plans greedily
+//! activations (its own forward pass, [`PolicyNet::forward_activations`]) over states
+//! recorded while it plays *training* plans greedily
 //! (`plans::TRAIN_SEEDS`, never the test range): the observed `[min, max]` widened to
 //! contain 0, so 0 is exactly the zero point (ReLU outputs: `[0, max]`, zero point −128).
 //! fc_belief and fc_side both requantise straight into the quantisation of fc_joint's input
@@ -22,7 +23,7 @@
 //! bit for bit what the instrument computes from the same blob and the same state.
 
 use super::agent::{argmax, features, shape_for, LearntAgent, ACTIONS};
-use super::net::{LayerKind, PolicyNet, ARCH_ID, N_LAYERS};
+use super::net::{PolicyNet, Scratch, ARCH_ID, N_LAYERS};
 use crate::episode::{run_episode_with, EpisodeSpec, Termination, Trajectory};
 use crate::plans;
 use crate::sensor::SensorModel;
@@ -40,100 +41,6 @@ use std::sync::Arc;
 
 /// Default number of calibration episodes.
 pub const DEFAULT_CALIBRATION_EPISODES: usize = 150;
-
-// ---------------------------------------------------------------------------------------
-// Float reference with every activation kept.
-
-/// Every tensor of one float forward pass (post-ReLU for the hidden layers).
-#[derive(Clone, Debug)]
-pub struct Activations {
-    /// conv1 output, `8 × 15 × 15`.
-    pub conv1: Vec<f32>,
-    /// conv2 output, `16 × 8 × 8` (= fc_belief's input).
-    pub conv2: Vec<f32>,
-    /// fc_belief output (first half of the concatenation).
-    pub belief: Vec<f32>,
-    /// fc_side output (second half).
-    pub side: Vec<f32>,
-    /// fc_joint output.
-    pub joint: Vec<f32>,
-    /// Actor logits.
-    pub logits: [f32; 3],
-    /// Critic value.
-    pub value: f32,
-}
-
-fn layer_forward(net: &PolicyNet, index: usize, input: &[f32]) -> Vec<f32> {
-    let layer = net.shape.layers()[index];
-    let w = &net.params[layer.weights()];
-    let b = &net.params[layer.bias()];
-    let mut out = match layer.kind {
-        LayerKind::Conv {
-            in_ch,
-            out_ch,
-            in_size,
-            out_size,
-        } => {
-            let mut out = vec![0.0f32; out_ch * out_size * out_size];
-            for o in 0..out_ch {
-                for oy in 0..out_size {
-                    for ox in 0..out_size {
-                        let mut acc = b[o];
-                        for c in 0..in_ch {
-                            for ky in 0..3 {
-                                for kx in 0..3 {
-                                    let (iy, ix) = (2 * oy + ky, 2 * ox + kx);
-                                    if iy < 1 || ix < 1 || iy > in_size || ix > in_size {
-                                        continue;
-                                    }
-                                    let x = input[(c * in_size + iy - 1) * in_size + ix - 1];
-                                    acc += w[((o * in_ch + c) * 3 + ky) * 3 + kx] * x;
-                                }
-                            }
-                        }
-                        out[(o * out_size + oy) * out_size + ox] = acc;
-                    }
-                }
-            }
-            out
-        }
-        LayerKind::Linear { inputs, outputs } => (0..outputs)
-            .map(|o| {
-                b[o] + w[o * inputs..(o + 1) * inputs]
-                    .iter()
-                    .zip(input)
-                    .map(|(w, x)| w * x)
-                    .sum::<f32>()
-            })
-            .collect(),
-    };
-    if layer.relu {
-        out.iter_mut().for_each(|v| *v = v.max(0.0));
-    }
-    out
-}
-
-/// The float network with every activation kept (plain loops; agrees with
-/// [`PolicyNet::forward`] up to float summation order).
-pub fn float_forward(net: &PolicyNet, belief: &[f32], side: &[f32]) -> Activations {
-    let conv1 = layer_forward(net, q::L_CONV1, belief);
-    let conv2 = layer_forward(net, q::L_CONV2, &conv1);
-    let hb = layer_forward(net, q::L_BELIEF, &conv2);
-    let hs = layer_forward(net, q::L_SIDE, side);
-    let cat: Vec<f32> = hb.iter().chain(&hs).copied().collect();
-    let joint = layer_forward(net, q::L_JOINT, &cat);
-    let logits = layer_forward(net, q::L_ACTOR, &joint);
-    let value = layer_forward(net, q::L_CRITIC, &joint);
-    Activations {
-        conv1,
-        conv2,
-        belief: hb,
-        side: hs,
-        joint,
-        logits: [logits[0], logits[1], logits[2]],
-        value: value[0],
-    }
-}
 
 // ---------------------------------------------------------------------------------------
 // Calibration.
@@ -193,24 +100,26 @@ pub struct Ranges {
 }
 
 impl Ranges {
-    /// Runs the float network on one state and widens the ranges.
-    pub fn observe(&mut self, net: &PolicyNet, belief: &[f32], side: &[f32]) {
-        let a = float_forward(net, belief, side);
+    /// Runs the network's own forward pass ([`PolicyNet::forward_activations`]) on one
+    /// state and widens the ranges by its activations.
+    pub fn observe(&mut self, net: &PolicyNet, belief: &[f32], side: &[f32], s: &mut Scratch) {
+        let a = net.forward_activations(belief, side, s);
         self.states += 1;
         self.belief_input.observe(belief);
         self.side_input.observe(side);
-        self.conv1.observe(&a.conv1);
-        self.conv2.observe(&a.conv2);
-        self.fc_belief.observe(&a.belief);
-        self.fc_side.observe(&a.side);
-        self.fc_joint.observe(&a.joint);
+        self.conv1.observe(a.conv1);
+        self.conv2.observe(a.conv2);
+        self.fc_belief.observe(a.belief);
+        self.fc_side.observe(a.side);
+        self.fc_joint.observe(a.joint);
     }
 
     /// Ranges over `states` (belief, side feature pairs).
     pub fn of(net: &PolicyNet, states: &[(Vec<f32>, Vec<f32>)]) -> Ranges {
         let mut r = Ranges::default();
+        let mut scratch = Scratch::new(net.shape);
         for (b, s) in states {
-            r.observe(net, b, s);
+            r.observe(net, b, s, &mut scratch);
         }
         r
     }
@@ -279,7 +188,8 @@ pub fn calibration_ranges(net: &PolicyNet, episodes: usize, seed: u64) -> Ranges
         .par_iter()
         .map(|spec| {
             let mut r = Ranges::default();
-            record_episode(&net, spec, |b, s| r.observe(&net, b, s));
+            let mut scratch = Scratch::new(net.shape);
+            record_episode(&net, spec, |b, s| r.observe(&net, b, s, &mut scratch));
             r
         })
         .reduce(Ranges::default, Ranges::merge)
@@ -678,22 +588,6 @@ pub fn random_net(rot_bins: u8, seed: u64) -> PolicyNet {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn float_forward_matches_the_network() {
-        for k in [1u8, 10] {
-            let net = random_net(k, 3);
-            let mut rng = Pcg64::seed_from_u64(1);
-            let b: Vec<f32> = (0..net.shape.belief_len()).map(|_| rng.gen()).collect();
-            let s: Vec<f32> = (0..SIDE_FEATURES).map(|_| rng.gen()).collect();
-            let a = float_forward(&net, &b, &s);
-            let o = net.forward(&b, &s);
-            for (x, y) in a.logits.iter().zip(o.logits) {
-                assert!((x - y).abs() < 1e-4 * (1.0 + y.abs()), "{x} vs {y}");
-            }
-            assert!((a.value - o.value).abs() < 1e-4 * (1.0 + o.value.abs()));
-        }
-    }
 
     #[test]
     fn multipliers_round_trip() {

@@ -28,8 +28,9 @@
 //! reduced in a fixed chunk order. The same seed gives the same weights byte for byte,
 //! whatever the number of threads.
 
-use super::agent::{action_index, masked_features, shape_for, InputMask, ACTIONS};
+use super::agent::{action_index, masked_features, shape_for, ACTIONS};
 use super::file;
+pub use super::hyper::HyperParams;
 use super::net::{self, Adam, BatchCache, NetShape, PolicyNet};
 use crate::episode::{score, start_episode, EpisodeSpec, Termination};
 use crate::plans;
@@ -51,108 +52,6 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-
-/// Every hyper-parameter of a training run.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct HyperParams {
-    /// Master seed: network initialisation, rooms, placements, noise, action draws.
-    pub seed: u64,
-    /// Rotation bins K of the localizer (1 = heading known).
-    pub rot_bins: u8,
-    /// Parallel environments.
-    pub num_envs: usize,
-    /// Steps per environment per update (the n-step segment).
-    pub segment_len: usize,
-    /// Total updates (`--updates`); `--minutes` may stop earlier.
-    pub updates: u64,
-    /// Discount γ (eq. 1).
-    pub gamma: f32,
-    /// GAE λ (eq. 4).
-    pub gae_lambda: f32,
-    /// Adam learning rate (A2C phase).
-    pub learning_rate: f32,
-    /// Adam learning rate while imitating the teacher.
-    pub imitation_learning_rate: f32,
-    /// Entropy bonus coefficient.
-    pub ent_coef: f32,
-    /// Value loss coefficient.
-    pub vf_coef: f32,
-    /// Global gradient-norm clip.
-    pub max_grad_norm: f32,
-    /// Normalise advantages within each update.
-    pub norm_adv: bool,
-    /// Action limit of a training episode.
-    pub max_actions: u16,
-    /// Reward: +this on coarse success.
-    pub success_reward: f32,
-    /// Reward: −this at the action limit.
-    pub limit_penalty: f32,
-    /// Reward: scale R_reg of the clipped quadratic registration term.
-    pub registration_reward: f32,
-    /// Reward: error e_tol (m) at which the registration term reaches 0.
-    pub registration_tolerance: f32,
-    /// Exploration bonus β per step (0 disables it).
-    pub exploration_bonus: f32,
-    /// Visits n₀ at which the bonus for a step index has halved.
-    pub exploration_half_visits: f32,
-    /// Warm-start updates that clone the teacher.
-    pub imitation_updates: u64,
-    /// The teacher (a Table-3 baseline).
-    pub teacher: AgentKind,
-    /// Updates between log lines.
-    pub log_every: u64,
-    /// Updates between checkpoints.
-    pub checkpoint_every: u64,
-    /// Inputs the policy is shown (`full`; `no-scans` and `no-belief` are the §4.4
-    /// ablations).
-    #[serde(default)]
-    pub inputs: InputMask,
-}
-
-impl HyperParams {
-    /// The defaults the committed policies were trained with (K set by the caller).
-    pub fn defaults(rot_bins: u8) -> Self {
-        HyperParams {
-            seed: 1,
-            rot_bins,
-            num_envs: 16,
-            segment_len: 16,
-            updates: 1000,
-            gamma: 0.99,
-            gae_lambda: 0.95,
-            learning_rate: 3e-4,
-            imitation_learning_rate: 1e-3,
-            ent_coef: 0.01,
-            vf_coef: 0.5,
-            max_grad_norm: 0.5,
-            norm_adv: true,
-            max_actions: 100,
-            success_reward: 1.0,
-            limit_penalty: 1.0,
-            registration_reward: 1.0,
-            registration_tolerance: 0.10,
-            exploration_bonus: 0.002,
-            exploration_half_visits: 1000.0,
-            imitation_updates: 200,
-            teacher: AgentKind::Heuristic1,
-            log_every: 10,
-            checkpoint_every: 100,
-            inputs: InputMask::Full,
-        }
-    }
-
-    /// One `name = value` line per hyper-parameter.
-    pub fn table(&self) -> String {
-        let v = serde_json::to_value(self).unwrap_or_default();
-        let mut s = String::new();
-        if let Some(map) = v.as_object() {
-            for (k, v) in map {
-                let _ = writeln!(s, "  {k:<24} = {v}");
-            }
-        }
-        s
-    }
-}
 
 /// The paper's reward for one step (before the end-of-episode terms).
 pub fn step_reward(action: Action, bonus: f32) -> f32 {

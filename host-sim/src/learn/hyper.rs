@@ -1,0 +1,189 @@
+//! The trainer's hyper-parameters, defined once (CleanRL's one-dataclass habit): every
+//! field of [`HyperParams`] carries its default here, as a clap attribute. The fields a user
+//! may set are `activesense train` flags (the command flattens this struct, so the flag, its
+//! help text and its default are these lines); the rest are `skip` fields, fixed at the
+//! value written next to them. [`HyperParams::defaults`] parses an empty command line, so
+//! the code and the CLI cannot disagree. A run prints the set ([`HyperParams::table`]) and
+//! stores it in the policy file's metadata (`hyper_params`).
+
+use super::agent::InputMask;
+use activesense_core::agents::AgentKind;
+use clap::{Args, FromArgMatches};
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+
+/// Every hyper-parameter of a training run. The first eleven are `activesense train` flags
+/// (doc comment = help text); the others are fixed.
+#[derive(Args, Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HyperParams {
+    /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=10))]
+    pub rot_bins: u8,
+    /// Number of updates (each: --envs environments × --segment steps, one gradient step).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
+    pub updates: u64,
+    /// Master seed (network, rooms, noise, action draws).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Parallel environments.
+    #[arg(long = "envs", value_name = "ENVS", default_value_t = 16,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
+    pub num_envs: usize,
+    /// Steps per environment per update (n-step segment).
+    #[arg(long = "segment", value_name = "SEGMENT", default_value_t = 16,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=512))]
+    pub segment_len: usize,
+    /// Warm-start updates imitating the teacher (0 = pure A2C from scratch).
+    #[arg(long, default_value_t = 200)]
+    pub imitation_updates: u64,
+    /// Adam learning rate.
+    #[arg(long = "lr", value_name = "LR", default_value_t = 3e-4)]
+    pub learning_rate: f32,
+    /// Entropy bonus coefficient.
+    #[arg(long, default_value_t = 0.01)]
+    pub ent_coef: f32,
+    /// Updates between log lines.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
+    pub log_every: u64,
+    /// Inputs the network is shown: `full`, or the §4.4 ablations `no-scans` (topological
+    /// scans zeroed) and `no-belief` (belief map zeroed: scans and history only).
+    #[arg(long, default_value = "full", value_parser = parse_inputs)]
+    #[serde(default)]
+    pub inputs: InputMask,
+    /// Scale of the clipped quadratic registration-error reward (0 = the §4.4 ablation
+    /// without the final-registration-error term).
+    #[arg(long, default_value_t = 1.0)]
+    pub registration_reward: f32,
+
+    // Fixed: not on the command line.
+    /// Discount γ (eq. 1).
+    #[arg(skip = 0.99)]
+    pub gamma: f32,
+    /// GAE λ (eq. 4).
+    #[arg(skip = 0.95)]
+    pub gae_lambda: f32,
+    /// Adam learning rate while imitating the teacher (`learning_rate` is the A2C phase's).
+    #[arg(skip = 1e-3)]
+    pub imitation_learning_rate: f32,
+    /// Value loss coefficient.
+    #[arg(skip = 0.5)]
+    pub vf_coef: f32,
+    /// Global gradient-norm clip.
+    #[arg(skip = 0.5)]
+    pub max_grad_norm: f32,
+    /// Normalise advantages within each update.
+    #[arg(skip = true)]
+    pub norm_adv: bool,
+    /// Action limit of a training episode.
+    #[arg(skip = 100u16)]
+    pub max_actions: u16,
+    /// Reward: +this on coarse success.
+    #[arg(skip = 1.0)]
+    pub success_reward: f32,
+    /// Reward: −this at the action limit.
+    #[arg(skip = 1.0)]
+    pub limit_penalty: f32,
+    /// Reward: error e_tol (m) at which the registration term reaches 0.
+    #[arg(skip = 0.10)]
+    pub registration_tolerance: f32,
+    /// Exploration bonus β per step (0 disables it).
+    #[arg(skip = 0.002)]
+    pub exploration_bonus: f32,
+    /// Visits n₀ at which the bonus for a step index has halved.
+    #[arg(skip = 1000.0)]
+    pub exploration_half_visits: f32,
+    /// The teacher (a Table-3 baseline).
+    #[arg(skip = AgentKind::Heuristic1)]
+    pub teacher: AgentKind,
+    /// Updates between checkpoints.
+    #[arg(skip = 100u64)]
+    pub checkpoint_every: u64,
+}
+
+fn parse_inputs(s: &str) -> Result<InputMask, String> {
+    InputMask::from_name(s)
+        .ok_or_else(|| format!("unknown input set '{s}' (expected full, no-scans or no-belief)"))
+}
+
+impl HyperParams {
+    /// The defaults the committed policies were trained with, K set by the caller: what
+    /// `activesense train --rot-bins K` runs with.
+    pub fn defaults(rot_bins: u8) -> Self {
+        let cmd = Self::augment_args(clap::Command::new("hyper-params").no_binary_name(true));
+        let m = cmd
+            .try_get_matches_from(["--rot-bins", "1"])
+            .expect("the defaults parse");
+        HyperParams {
+            rot_bins,
+            ..Self::from_arg_matches(&m).expect("the defaults parse")
+        }
+    }
+
+    /// One `name = value` line per hyper-parameter.
+    pub fn table(&self) -> String {
+        let v = serde_json::to_value(self).unwrap_or_default();
+        let mut s = String::new();
+        if let Some(map) = v.as_object() {
+            for (k, v) in map {
+                let _ = writeln!(s, "  {k:<24} = {v}");
+            }
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The values the committed policies were trained with, written out: a change to a
+    /// default above must be a change to this test too.
+    #[test]
+    fn defaults_are_the_committed_policies() {
+        let hp = HyperParams::defaults(10);
+        let expected = HyperParams {
+            rot_bins: 10,
+            updates: 1000,
+            seed: 1,
+            num_envs: 16,
+            segment_len: 16,
+            imitation_updates: 200,
+            learning_rate: 3e-4,
+            ent_coef: 0.01,
+            log_every: 10,
+            inputs: InputMask::Full,
+            registration_reward: 1.0,
+            gamma: 0.99,
+            gae_lambda: 0.95,
+            imitation_learning_rate: 1e-3,
+            vf_coef: 0.5,
+            max_grad_norm: 0.5,
+            norm_adv: true,
+            max_actions: 100,
+            success_reward: 1.0,
+            limit_penalty: 1.0,
+            registration_tolerance: 0.10,
+            exploration_bonus: 0.002,
+            exploration_half_visits: 1000.0,
+            teacher: AgentKind::Heuristic1,
+            checkpoint_every: 100,
+        };
+        assert_eq!(hp, expected);
+    }
+
+    #[test]
+    fn flags_override_and_fixed_fields_stay() {
+        let cmd = HyperParams::augment_args(clap::Command::new("t").no_binary_name(true));
+        let m = cmd
+            .try_get_matches_from(["--rot-bins", "10", "--envs", "4", "--lr", "1e-4"])
+            .unwrap();
+        let hp = HyperParams::from_arg_matches(&m).unwrap();
+        assert_eq!(hp.num_envs, 4);
+        assert_eq!(hp.learning_rate, 1e-4);
+        assert_eq!(hp.gamma, 0.99);
+        let cmd = HyperParams::augment_args(clap::Command::new("t").no_binary_name(true));
+        assert!(cmd
+            .try_get_matches_from(["--rot-bins", "1", "--envs", "0"])
+            .is_err());
+    }
+}
