@@ -40,8 +40,8 @@
 //! The staging area ([`GhtLocalizer::stage`]) runs the same vote into the scratch layer and
 //! folds it into an entropy sum without writing the accumulator.
 
-use crate::geometry::{unit, Vec2};
-use crate::math::{cos, exp, ln};
+use crate::world::geometry::{unit, Vec2};
+use crate::world::math::{cos, exp, ln};
 use crate::{FloorPlan, Pose2};
 use heapless::Vec as HVec;
 use serde::{Deserialize, Serialize};
@@ -222,7 +222,7 @@ impl GhtLocalizer {
     /// Sets the known heading for `K = 1` (new episode on the same plan; clears the votes).
     pub fn set_known_heading(&mut self, h: f32) {
         self.cfg.known_heading = h;
-        self.grid.known_heading = crate::math::wrap_angle(h);
+        self.grid.known_heading = crate::world::math::wrap_angle(h);
         self.clear();
     }
 

@@ -33,11 +33,11 @@
 //! episodes): a 3-heading sweep instead of 9 gave 0.075 m, starting the leave-out fits from
 //! the all-readings fit without a sweep 0.091 m, against 0.070 m as built.
 
-use crate::floorplan::FloorPlan;
-use crate::geometry::Pose2;
+use crate::world::floorplan::FloorPlan;
+use crate::world::geometry::Pose2;
 use crate::localization::grid::CellIndex;
 use crate::localization::GhtLocalizer;
-use crate::math::ln;
+use crate::world::math::ln;
 use crate::registration::{
     self, AnnealParams, IcpParams, Observations, RangeFit, RangeModel, Registration,
     RegistrationError, MAX_EXCLUDED, NOT_EXCLUDED,
@@ -246,7 +246,7 @@ pub fn refine(input: &RefineInput<'_>) -> Result<Refinement, RegistrationError> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::unit;
+    use crate::world::geometry::unit;
     use crate::localization::LocalizerConfig;
     use crate::pipeline::tests::l_room;
     use crate::registration::Measurement;
