@@ -86,9 +86,9 @@ pub mod agents {
     pub use crate::policy::baselines::BaselineAgent;
 }
 #[doc(hidden)]
-pub use device::instrument;
-#[doc(hidden)]
 pub use device as session;
+#[doc(hidden)]
+pub use device::instrument;
 #[doc(hidden)]
 pub use pipeline::runner;
 #[doc(hidden)]

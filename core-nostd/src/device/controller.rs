@@ -323,15 +323,13 @@ impl Controller {
             DeviceAgent::Baseline(BaselineAgent::new(p.agent, p.seed))
         };
         let plan = self.plan.as_ref().ok_or(WireError::NoPlan)?;
-        self.runner
-            .start(plan, p)
-            .map_err(|e| {
-                WireError::InvalidParams(match e {
-                    PipelineError::KnownHeadingRequired => ParamError::KnownHeadingRequired,
-                    PipelineError::GroundTruthRequired => ParamError::GroundTruthRequired,
-                    PipelineError::Localizer(_) => ParamError::PlanNotLocalizable,
-                })
-            })?;
+        self.runner.start(plan, p).map_err(|e| {
+            WireError::InvalidParams(match e {
+                PipelineError::KnownHeadingRequired => ParamError::KnownHeadingRequired,
+                PipelineError::GroundTruthRequired => ParamError::GroundTruthRequired,
+                PipelineError::Localizer(_) => ParamError::PlanNotLocalizable,
+            })
+        })?;
         self.running = Some(Running {
             agent,
             pending: None,
@@ -472,4 +470,3 @@ impl Controller {
         Some(Self::report(&self.runner, &r, EpisodeEnd::Aborted))
     }
 }
-

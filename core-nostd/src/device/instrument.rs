@@ -17,9 +17,9 @@
 //! [`run_local`] runs a whole episode against any `Instrument` in-process (the firmware's
 //! stand-alone mode on real hardware, and the reference run the link tests compare to).
 
+use crate::device::{Controller, Step};
 use crate::episode::Action;
 use crate::episode::{Observation, SCAN_PIXELS};
-use crate::device::{Controller, Step};
 use crate::protocol::{EpisodeParams, EpisodeReport, WireError};
 use crate::FloorPlan;
 use embedded_hal::delay::DelayNs;

@@ -29,7 +29,6 @@
 //! termination rule fires, and at the end of every episode reports the coarse (belief
 //! argmax) and refined (sparse registration) AgentPoses.
 
-
 pub mod controller;
 pub mod instrument;
 pub mod session;

@@ -4,8 +4,8 @@
 //! robustness rules.
 
 use super::controller::{Controller, Step};
-use crate::protocol::*;
 use crate::limits::SCAN_PIXELS;
+use crate::protocol::*;
 use crate::world::floorplan::{FloorPlan, PlanError, MAX_VERTICES};
 use embedded_io::{Read, Write};
 use heapless::{String as HString, Vec as HVec};

@@ -70,7 +70,6 @@ impl Observation {
         Ok(())
     }
 
-
     /// Packs scan pixels into the bit mask.
     pub fn pack_scan(pixels: &[bool; SCAN_PIXELS]) -> u32 {
         pixels

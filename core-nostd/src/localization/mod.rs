@@ -34,6 +34,7 @@
 pub mod ght;
 pub mod grid;
 pub mod rtable;
+mod vote;
 
 pub use ght::{GhtLocalizer, Staged, VoteStats};
 pub use grid::{CellIndex, GridSpec, Mode};

@@ -24,8 +24,6 @@
 //! `const fn` so the firmware keeps it in a `static`.
 
 use crate::episode::{AgentKind, EpisodeConfig, EpisodeParams};
-use crate::world::floorplan::FloorPlan;
-use crate::world::geometry::Pose2;
 use crate::localization::{CellIndex, GhtLocalizer, LocError, LocalizerConfig};
 use crate::registration::refine::{self, RefineInput, Refinement};
 use crate::registration::{
@@ -33,6 +31,8 @@ use crate::registration::{
     RegistrationError,
 };
 use crate::stop::{self, StopFeatures, StopModel};
+use crate::world::floorplan::FloorPlan;
+use crate::world::geometry::Pose2;
 use crate::world::symmetry::{symmetry_order, SymmetryTolerance};
 use serde::{Deserialize, Serialize};
 
@@ -326,7 +326,8 @@ impl Pipeline {
         let offset_bins = if self.params.heading_known() {
             0.0
         } else {
-            crate::world::math::abs(crate::world::math::wrap_angle(pose.theta - coarse.theta)) / grid.bin_width()
+            crate::world::math::abs(crate::world::math::wrap_angle(pose.theta - coarse.theta))
+                / grid.bin_width()
         };
         Some(StopFeatures {
             peak_mass,
@@ -341,7 +342,8 @@ impl Pipeline {
             edge_margin: {
                 let lo = grid.cell_centre(answer.ix as usize, answer.iy as usize);
                 let (hx, hy) = (0.5 * grid.cell[0], 0.5 * grid.cell[1]);
-                (hx - crate::world::math::abs(pose.x - lo.x)).min(hy - crate::world::math::abs(pose.y - lo.y))
+                (hx - crate::world::math::abs(pose.x - lo.x))
+                    .min(hy - crate::world::math::abs(pose.y - lo.y))
             },
             agrees: grid.cell_of_pose(&pose).is_some_and(|c| {
                 c.ix == argmax.ix && c.iy == argmax.iy && grid.bin_distance(c.bin, argmax.bin) <= 1
@@ -587,12 +589,29 @@ pub(crate) mod tests {
     #[test]
     fn refuses_incomplete_params() {
         let mut p = Pipeline::new_empty();
-        let base = EpisodeParams { agent: AgentKind::Heuristic1, seed: 1, rot_bins: 1, known_heading: None, ground_truth: None, initial_scan: 0, termination: Termination::ActionLimit, config: EpisodeConfig { min_observability: 0.0, stop_risk: DEFAULT_STOP_RISK, ..EpisodeConfig::DEFAULT } };
+        let base = EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 1,
+            rot_bins: 1,
+            known_heading: None,
+            ground_truth: None,
+            initial_scan: 0,
+            termination: Termination::ActionLimit,
+            config: EpisodeConfig {
+                min_observability: 0.0,
+                stop_risk: DEFAULT_STOP_RISK,
+                ..EpisodeConfig::DEFAULT
+            },
+        };
         assert_eq!(
             p.start(&l_room(), &base),
             Err(PipelineError::KnownHeadingRequired)
         );
-        let oracle = EpisodeParams { rot_bins: 10, termination: Termination::Oracle, ..base };
+        let oracle = EpisodeParams {
+            rot_bins: 10,
+            termination: Termination::Oracle,
+            ..base
+        };
         assert_eq!(
             p.start(&l_room(), &oracle),
             Err(PipelineError::GroundTruthRequired)
@@ -607,7 +626,20 @@ pub(crate) mod tests {
         let mut p = Pipeline::new_empty();
         p.start(
             &plan,
-            &EpisodeParams { agent: AgentKind::Heuristic1, seed: 3, rot_bins: 10, known_heading: None, ground_truth: Some(truth), initial_scan: 0, termination: Termination::Oracle, config: EpisodeConfig { min_observability: 0.0, stop_risk: DEFAULT_STOP_RISK, ..EpisodeConfig::DEFAULT } },
+            &EpisodeParams {
+                agent: AgentKind::Heuristic1,
+                seed: 3,
+                rot_bins: 10,
+                known_heading: None,
+                ground_truth: Some(truth),
+                initial_scan: 0,
+                termination: Termination::Oracle,
+                config: EpisodeConfig {
+                    min_observability: 0.0,
+                    stop_risk: DEFAULT_STOP_RISK,
+                    ..EpisodeConfig::DEFAULT
+                },
+            },
         )
         .unwrap();
         let mut stopped = None;
@@ -643,7 +675,20 @@ pub(crate) mod tests {
 
     /// Confident termination at K = 10 with the truth known (for scoring) and stop risk `p`.
     fn confident_params(truth: Pose2, p: f32) -> EpisodeParams {
-        EpisodeParams { agent: AgentKind::Heuristic1, seed: 5, rot_bins: 10, known_heading: None, ground_truth: Some(truth), initial_scan: 0, termination: Termination::Confident, config: EpisodeConfig { min_observability: 0.0, stop_risk: p, ..EpisodeConfig::DEFAULT } }
+        EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 5,
+            rot_bins: 10,
+            known_heading: None,
+            ground_truth: Some(truth),
+            initial_scan: 0,
+            termination: Termination::Confident,
+            config: EpisodeConfig {
+                min_observability: 0.0,
+                stop_risk: p,
+                ..EpisodeConfig::DEFAULT
+            },
+        }
     }
 
     /// A confident episode that never gets sure enough to stop answers with its lowest-risk

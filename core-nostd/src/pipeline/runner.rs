@@ -17,9 +17,9 @@
 
 use crate::episode::Action;
 use crate::episode::{EpisodeConfig, EpisodeParams, EpisodeState, Observation, ObservationError};
-use crate::world::floorplan::FloorPlan;
 use crate::pipeline::{Pipeline, PipelineError, PipelineResult, Stop};
 use crate::policy::{History, Policy, PolicyInput};
+use crate::world::floorplan::FloorPlan;
 
 /// What booking an observation did to the episode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -185,9 +185,9 @@ mod tests {
     use super::*;
     use crate::episode::AgentKind;
     use crate::limits::SCAN_PIXELS;
+    use crate::pipeline::Termination;
     use crate::policy::BaselineAgent;
     use crate::world::geometry::v2;
-    use crate::pipeline::Termination;
 
     #[test]
     fn rejects_bad_answers_and_keeps_state() {
@@ -195,9 +195,21 @@ mod tests {
             .unwrap()
             .centered();
         let mut r = EpisodeRunner::new_empty();
-        let params = EpisodeParams { agent: AgentKind::Heuristic1, seed: 1, rot_bins: 10, known_heading: None, ground_truth: None, initial_scan: 0, termination: Termination::ActionLimit, config: EpisodeConfig { min_observability: 0.0, stop_risk: crate::pipeline::DEFAULT_STOP_RISK, ..EpisodeConfig::DEFAULT } };
-        r.start(&plan, &params)
-            .unwrap();
+        let params = EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 1,
+            rot_bins: 10,
+            known_heading: None,
+            ground_truth: None,
+            initial_scan: 0,
+            termination: Termination::ActionLimit,
+            config: EpisodeConfig {
+                min_observability: 0.0,
+                stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
+                ..EpisodeConfig::DEFAULT
+            },
+        };
+        r.start(&plan, &params).unwrap();
         let mut agent = BaselineAgent::new(AgentKind::Heuristic1, 1);
         assert_eq!(r.decide(&mut agent), Some(Action::Measure));
         let bad = [

@@ -253,8 +253,8 @@ impl Policy for BaselineAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::geometry::unit;
     use crate::localization::LocalizerConfig;
+    use crate::world::geometry::unit;
 
     #[test]
     fn belief_map_is_probability_over_peak_bit_for_bit() {

@@ -439,4 +439,3 @@ impl core::fmt::Display for WireError {
         }
     }
 }
-

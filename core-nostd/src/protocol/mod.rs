@@ -68,4 +68,3 @@ pub const CAP_LEARNT_POLICY: u32 = 1 << 6;
 pub const CAP_POLICY_UPLOAD: u32 = 1 << 7;
 /// Payload bytes of one [`Request::PolicyChunk`].
 pub const POLICY_CHUNK: usize = 512;
-

@@ -195,4 +195,3 @@ pub(super) fn min_eigen_3x3(m: &[[f32; 3]; 3]) -> f32 {
     // Eigenvalues q + 2p·cos(φ + 2πk/3); k = 1 gives the smallest.
     q + 2.0 * p * cos(phi + TAU / 3.0)
 }
-

@@ -79,7 +79,6 @@
 //! bit for bit on host and MCU. Nothing is allocated; the per-call scratch is a few KiB of
 //! stack ([`MAX_OBSERVATIONS`] pairs, ≈ 14 KiB at 500).
 
-
 pub mod fits;
 pub mod icp;
 pub mod pose_distance;
@@ -230,4 +229,3 @@ impl Observations {
         self.pts.clear();
     }
 }
-

@@ -1,6 +1,10 @@
 use super::*;
 
-fn params(termination: Termination, known_heading: Option<f32>, gt: Option<Pose2>) -> EpisodeParams {
+fn params(
+    termination: Termination,
+    known_heading: Option<f32>,
+    gt: Option<Pose2>,
+) -> EpisodeParams {
     EpisodeParams {
         agent: AgentKind::Heuristic1,
         seed: 0x0123_4567_89AB_CDEF,
@@ -61,7 +65,11 @@ fn stop_rule_validation() {
     for risk in [f32::NAN, 0.0, -0.01, 1.5, f32::INFINITY, f32::NEG_INFINITY] {
         let mut p = full();
         p.config.stop_risk = risk;
-        assert_eq!(p.check_stop_rule(), Err(ParamError::InvalidStopRisk), "{risk}");
+        assert_eq!(
+            p.check_stop_rule(),
+            Err(ParamError::InvalidStopRisk),
+            "{risk}"
+        );
     }
     for tau in [-1.0, f32::NAN, 1.01, f32::INFINITY, -0.0001] {
         let mut p = full();

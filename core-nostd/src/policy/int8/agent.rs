@@ -65,4 +65,3 @@ impl Policy for ScratchAgent<'_, '_> {
             .map_or(Action::Measure, |d| d.action)
     }
 }
-

@@ -43,4 +43,3 @@ impl core::fmt::Display for BlobError {
         }
     }
 }
-

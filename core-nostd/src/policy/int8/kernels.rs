@@ -66,7 +66,13 @@ pub fn multiply_by_quantized_multiplier(x: i32, multiplier: i32, shift: i32) -> 
 
 /// Requantises an accumulator (bias included) to int8 with the layer's output zero point;
 /// the clamp's lower end is the zero point when a ReLU follows (real 0).
-pub(super) fn requantize_i8(acc: i32, multiplier: i32, shift: i32, zero_point: i32, relu: bool) -> i8 {
+pub(super) fn requantize_i8(
+    acc: i32,
+    multiplier: i32,
+    shift: i32,
+    zero_point: i32,
+    relu: bool,
+) -> i8 {
     let lo = if relu { zero_point } else { -128 };
     multiply_by_quantized_multiplier(acc, multiplier, shift)
         .saturating_add(zero_point)
@@ -222,4 +228,3 @@ pub(super) fn fully_connected_i32(layer: &LayerView<'_>, input: &[i8], out: &mut
         *o = multiply_by_quantized_multiplier(acc, mult, shift);
     }
 }
-

@@ -34,13 +34,13 @@ pub mod error;
 pub mod kernels;
 pub mod write;
 
+use crate::checksum::crc32;
+use crate::localization::MAX_ROT_BINS;
+use crate::policy::{PolicyInput, BELIEF_PLANE, BELIEF_SIDE, SIDE_FEATURES};
 pub use agent::{QuantizedAgent, ScratchAgent};
 pub use error::BlobError;
 pub use kernels::*;
 pub use write::{blob_len, write_blob, LayerTensors};
-use crate::localization::MAX_ROT_BINS;
-use crate::policy::{PolicyInput, BELIEF_PLANE, BELIEF_SIDE, SIDE_FEATURES};
-use crate::checksum::crc32;
 
 /// First eight bytes of every blob.
 pub const MAGIC: [u8; 8] = *b"ASQPOLCY";
