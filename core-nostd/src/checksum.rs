@@ -5,30 +5,14 @@
 //! fingerprints every episode trace with it ([`crate::protocol`]); neither may import the
 //! other.
 
-// Nibble-table implementation: 64 bytes of table, fine for ~1 KiB frames.
-const fn crc_table() -> [u32; 16] {
-    let mut t = [0u32; 16];
-    let mut i = 0;
-    while i < 16 {
-        let mut c = i as u32;
-        let mut k = 0;
-        while k < 4 {
-            c = if c & 1 != 0 {
-                (c >> 1) ^ 0xEDB8_8320
-            } else {
-                c >> 1
-            };
-            k += 1;
-        }
-        t[i] = c;
-        i += 1;
-    }
-    t
-}
+use crc::{Crc, Table, CRC_32_ISO_HDLC};
 
-const CRC_TABLE: [u32; 16] = crc_table();
+/// The algorithm, from the `crc` crate (byte-wise table: 1 KiB of flash; `docs/protocol.md`
+/// has the measured choice).
+const CRC: Crc<u32, Table<1>> = Crc::<u32, Table<1>>::new(&CRC_32_ISO_HDLC);
 
-/// Incremental CRC-32 (IEEE).
+/// Incremental CRC-32 (IEEE). Holds the CRC of everything fed so far, so it is `Copy` and
+/// `const`-constructible (the episode trace hash lives in a `static` on the device).
 #[derive(Clone, Copy, Debug)]
 pub struct Crc32(u32);
 
@@ -39,31 +23,27 @@ impl Default for Crc32 {
 }
 
 impl Crc32 {
-    /// A fresh CRC.
+    /// A fresh CRC (of nothing: 0).
     pub const fn new() -> Self {
-        Crc32(0xFFFF_FFFF)
+        Crc32(0)
     }
-    /// Feeds bytes.
+    /// Feeds bytes: resumes the `crc` crate's digest from the CRC so far. For ISO-HDLC
+    /// (reflected, xorout `0xFFFFFFFF`) the register after `c` is `!c`, which
+    /// `digest_with_initial` takes bit-reversed.
     pub fn update(&mut self, data: &[u8]) {
-        let mut c = self.0;
-        for &b in data {
-            c ^= b as u32;
-            c = (c >> 4) ^ CRC_TABLE[(c & 15) as usize];
-            c = (c >> 4) ^ CRC_TABLE[(c & 15) as usize];
-        }
-        self.0 = c;
+        let mut d = CRC.digest_with_initial((!self.0).reverse_bits());
+        d.update(data);
+        self.0 = d.finalize();
     }
     /// The CRC of everything fed so far.
     pub fn finish(&self) -> u32 {
-        !self.0
+        self.0
     }
 }
 
 /// CRC-32 (IEEE) of `data`.
 pub fn crc32(data: &[u8]) -> u32 {
-    let mut c = Crc32::new();
-    c.update(data);
-    c.finish()
+    CRC.checksum(data)
 }
 
 #[cfg(test)]
@@ -78,5 +58,36 @@ mod tests {
         c.update(b"1234");
         c.update(b"56789");
         assert_eq!(c.finish(), 0xCBF4_3926);
+    }
+
+    /// The bitwise definition (the nibble-table code this module had before the `crc`
+    /// crate): every length and split gives the same CRC.
+    #[test]
+    fn matches_the_bitwise_definition() {
+        fn reference(data: &[u8]) -> u32 {
+            let mut c = 0xFFFF_FFFFu32;
+            for &b in data {
+                c ^= b as u32;
+                for _ in 0..8 {
+                    c = if c & 1 != 0 {
+                        (c >> 1) ^ 0xEDB8_8320
+                    } else {
+                        c >> 1
+                    };
+                }
+            }
+            !c
+        }
+        let data: [u8; 300] =
+            core::array::from_fn(|i| (i as u32).wrapping_mul(2_654_435_761) as u8);
+        for n in [0, 1, 3, 4, 9, 64, 255, 300] {
+            assert_eq!(crc32(&data[..n]), reference(&data[..n]), "{n}");
+            for split in [0, n / 3, n / 2, n] {
+                let mut c = Crc32::new();
+                c.update(&data[..split]);
+                c.update(&data[split..n]);
+                assert_eq!(c.finish(), reference(&data[..n]), "{n} {split}");
+            }
+        }
     }
 }

@@ -66,7 +66,9 @@ impl TraceHash {
 // ---------------------------------------------------------------------------------------
 // COBS
 
-/// COBS-encodes `src` into `dst` (no delimiter); returns the encoded length.
+/// COBS-encodes `src` into `dst` (no delimiter); returns the encoded length. Our own
+/// codec, not the `cobs` crate: `docs/protocol.md` ("CRC-32 and COBS") has the measured
+/// reasons (frame bytes, buffer bounds, error rules).
 pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Result<usize, FrameError> {
     let mut code_idx = 0usize;
     let mut out = 1usize;
@@ -276,6 +278,29 @@ mod tests {
             let d = cobs_decode_in_place(&mut enc[..n]).unwrap();
             assert_eq!(&enc[..d], src);
         }
+    }
+
+    /// Protocol v5 frames, byte for byte: a block of 254 non-zero bytes at the end is
+    /// followed by the code byte 0x01 (the `cobs` crate omits it), and a `StartEpisode`
+    /// frame encoded by the protocol-v5 code (before the one `EpisodeParams`).
+    #[test]
+    fn frame_bytes_are_protocol_v5() {
+        let mut enc = [0u8; 300];
+        let n = cobs_encode(&[0xFF; 254], &mut enc).unwrap();
+        assert_eq!((n, enc[0], enc[255]), (256, 0xFF, 0x01));
+        const V5_START_EPISODE: [u8; 49] = [
+            17, 42, 3, 4, 239, 155, 175, 205, 248, 172, 209, 145, 1, 54, 100, 10, 1, 1, 4, 128, 62,
+            1, 1, 1, 2, 63, 1, 3, 128, 190, 1, 9, 128, 63, 22, 1, 205, 204, 76, 61, 1, 1, 6, 62,
+            242, 155, 139, 156, 0,
+        ];
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode_frame(42, &Request::StartEpisode(episode_params()), &mut out).unwrap();
+        assert_eq!(out[..n], V5_START_EPISODE);
+        let mut f = V5_START_EPISODE;
+        assert_eq!(
+            decode_frame::<Request>(&mut f[..48]).unwrap(),
+            (42, Request::StartEpisode(episode_params()))
+        );
     }
 
     fn roundtrip(msg: &Request) {
