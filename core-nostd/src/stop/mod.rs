@@ -1,6 +1,6 @@
 //! The calibrated stop (issue 12): an instrument has no ground truth, so it stops when the
 //! *estimated probability that its registration is wrong* falls below the user's risk
-//! `P` ([`crate::pipeline::PipelineParams::stop_risk`], default 1 %).
+//! `P` ([`crate::episode::EpisodeConfig::stop_risk`], default 1 %).
 //!
 //! **What "wrong" means.** Under this stop the instrument answers with its refined pose,
 //! so the answer is right when the cell that pose lies in is a coarse success (the

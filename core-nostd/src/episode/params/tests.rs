@@ -1,3 +1,6 @@
+//! Tests of the one episode parameter type: its protocol-v5 wire bytes (a test vector
+//! encoded by the old `wire::EpisodeParams`), its validity check and its seed derivation.
+
 use super::*;
 
 fn params(
