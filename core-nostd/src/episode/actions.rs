@@ -142,7 +142,7 @@ impl AgentKind {
         }
     }
 
-    /// True for the seven Table-3 baselines (which [`BaselineAgent`] plays).
+    /// True for the seven Table-3 baselines (which [`BaselineAgent`](crate::policy::BaselineAgent) plays).
     pub fn is_baseline(self) -> bool {
         AgentKind::ALL.contains(&self)
     }

@@ -304,7 +304,7 @@ pub struct EpisodeReport {
     pub cost: f32,
     /// Final encoder position (rotation steps).
     pub bearing_index: u16,
-    /// CRC-32 over the episode's (action, observation) stream, see [`TraceHash`].
+    /// CRC-32 over the episode's (action, observation) stream, see [`TraceHash`](super::TraceHash).
     pub trace_hash: u32,
     /// Coarse AgentPose from the GHT localizer (the belief argmax; `None` when no
     /// measurement returned). With `Termination::Confident`, the cell the refined pose lies

@@ -7,7 +7,7 @@ use crate::episode::Action;
 use crate::policy::{Policy, PolicyInput};
 
 /// The int8 policy as an agent: a parsed blob and its own [`Scratch`]. Put it in a
-/// `static` (≈ [`SCRATCH_BYTES`]) on the device.
+/// `static` (≈ [`SCRATCH_BYTES`](super::SCRATCH_BYTES)) on the device.
 #[derive(Clone, Debug)]
 pub struct QuantizedAgent<'a> {
     /// The network.

@@ -24,7 +24,7 @@
 //!
 //! Embedding: `static BLOB: &[u8] = include_bytes!("policy.int8");` parsed at boot with
 //! [`QuantizedPolicy::parse`], then a [`QuantizedAgent`] (it owns its [`Scratch`]) plays
-//! behind the [`Policy`] seam like any baseline. The host runs this very code, so its
+//! behind the [`Policy`](crate::policy::Policy) seam like any baseline. The host runs this very code, so its
 //! integer results are the reference for the device, bit for bit.
 
 use crate::episode::Action;
