@@ -54,9 +54,7 @@ mod usart;
 #[cfg(feature = "log-rtt")]
 use defmt_rtt as _;
 
-use activesense_core::device::{
-    Control, Session, SessionConfig, SessionEvent, DEFAULT_TIMEOUT_MS,
-};
+use activesense_core::device::{Control, Session, SessionConfig, SessionEvent, DEFAULT_TIMEOUT_MS};
 use activesense_core::episode::AgentKind;
 use activesense_core::policy::BaselineAgent;
 use activesense_core::world::geometry::{unit, v2};

@@ -5,11 +5,11 @@
 //! in-process run and to the lead's episode runner) and [`fault_suite`] (every documented
 //! error, after which the device serves the next request/session).
 
-use activesense_core::episode::{Action, AgentKind};
 use activesense_core::episode::Observation;
-use activesense_core::world::floorplan::PlanError;
 use activesense_core::episode::Termination;
+use activesense_core::episode::{Action, AgentKind};
 use activesense_core::protocol::*;
+use activesense_core::world::floorplan::PlanError;
 use activesense_sim::device::sim_episode;
 use activesense_sim::episode::{EndReason, EpisodeSpec, Trajectory};
 use activesense_sim::learn::agent::{run_agent_episode, Int8Policy, Policies};
