@@ -13,7 +13,7 @@
 //! ## Layers
 //!
 //! Lowest first; a module imports only from layers below it (measured by
-//! `python3 shared/hooks/modgraph.py core-nostd/src`: no cycles).
+//! the project's `modgraph.py` over `core-nostd/src`: no cycles, no import upwards).
 //!
 //! | layer | modules | what |
 //! |---|---|---|
