@@ -13,7 +13,7 @@
 //!   only. (The tick must stay on while idle: QEMU with `-icount` and no timer armed can
 //!   miss the USART wake-up.)
 //! * default: serve the serial protocol (`docs/protocol.md`,
-//!   [`activesense_core::session`]) on USART1 (QEMU `serial0`) until the host sends
+//!   [`activesense_core::device`]) on USART1 (QEMU `serial0`) until the host sends
 //!   `Shutdown`; then print `activesense-firmware: shutdown` and exit with status 0.
 //!   The firmware owns the decisions; in simulation the host answers its action requests.
 //!
@@ -54,11 +54,10 @@ mod usart;
 #[cfg(feature = "log-rtt")]
 use defmt_rtt as _;
 
-use activesense_core::agents::{AgentKind, BaselineAgent};
-use activesense_core::geometry::{unit, v2};
-use activesense_core::session::{
-    Control, Session, SessionConfig, SessionEvent, DEFAULT_TIMEOUT_MS,
-};
+use activesense_core::device::{Control, Session, SessionConfig, SessionEvent, DEFAULT_TIMEOUT_MS};
+use activesense_core::episode::AgentKind;
+use activesense_core::policy::BaselineAgent;
+use activesense_core::world::geometry::{unit, v2};
 use activesense_core::FloorPlan;
 use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::syst::SystClkSource;
@@ -118,7 +117,7 @@ const CONFIG: SessionConfig = SessionConfig {
     firmware: concat!("activesense-fw ", env!("CARGO_PKG_VERSION")),
     timeout_ms: DEFAULT_TIMEOUT_MS,
     cycle_clock: Some(cycles),
-    policies: &activesense_core::builtin::POLICIES,
+    policies: &activesense_core::policy::builtin::POLICIES,
 };
 
 /// The whole protocol state (frame buffers, plan, measurement log) lives here, not on
@@ -203,11 +202,11 @@ fn main() -> ! {
     let Ok(()) = session.announce(&mut uart);
     hprintln!(
         "activesense-firmware: serving protocol v{} on USART1",
-        activesense_core::wire::PROTOCOL_VERSION
+        activesense_core::protocol::PROTOCOL_VERSION
     );
     defmt::info!(
         "serving protocol v{=u16} on USART1",
-        activesense_core::wire::PROTOCOL_VERSION
+        activesense_core::protocol::PROTOCOL_VERSION
     );
     let mut buf = [0u8; 64];
     loop {
@@ -294,7 +293,7 @@ fn self_test() -> Result<u32, &'static str> {
     }
     let mut agent = BaselineAgent::new(AgentKind::Heuristic1, 0);
     let measures = (0..6)
-        .filter(|_| agent.next_action() == activesense_core::agents::Action::Measure)
+        .filter(|_| agent.next_action() == activesense_core::episode::Action::Measure)
         .count();
     if measures != 1 {
         return Err("agent period");

@@ -5,11 +5,10 @@
 //! tensor table and the kernels instead of stopping at the checksum.
 #![no_main]
 
-use activesense_core::episode::EpisodeConfig;
-use activesense_core::geometry::v2;
-use activesense_core::pipeline::{PipelineParams, Termination};
-use activesense_core::quantized::{QuantizedPolicy, Scratch};
-use activesense_core::runner::EpisodeRunner;
+use activesense_core::episode::{AgentKind, EpisodeConfig, EpisodeParams, Termination};
+use activesense_core::pipeline::runner::EpisodeRunner;
+use activesense_core::policy::int8::{QuantizedPolicy, Scratch};
+use activesense_core::world::geometry::v2;
 use activesense_core::FloorPlan;
 use libfuzzer_sys::fuzz_target;
 
@@ -20,14 +19,14 @@ fuzz_target!(|data: &[u8]| {
     let bytes: Vec<u8> = if mode & 1 == 0 {
         rest.to_vec()
     } else {
-        let mut b = activesense_core::builtin::K1.to_vec();
+        let mut b = activesense_core::policy::builtin::K1.to_vec();
         for e in rest.chunks_exact(3) {
             let at = u16::from_le_bytes([e[0], e[1]]) as usize % b.len();
             b[at] ^= e[2];
         }
         let n = b.len();
         b[20..24].copy_from_slice(&(n as u32).to_le_bytes());
-        let crc = activesense_core::wire::crc32(&b[..n - 4]);
+        let crc = activesense_core::checksum::crc32(&b[..n - 4]);
         b[n - 4..].copy_from_slice(&crc.to_le_bytes());
         b
     };
@@ -38,19 +37,17 @@ fuzz_target!(|data: &[u8]| {
         .expect("square")
         .centered();
     let mut runner = Box::new(EpisodeRunner::new_empty());
-    let params = PipelineParams {
+    let params = EpisodeParams {
+        agent: AgentKind::Blind0,
+        seed: 1,
         rot_bins: policy.rot_bins().clamp(1, 10),
         known_heading: Some(0.0),
         ground_truth: None,
+        initial_scan: 0b101,
         termination: Termination::ActionLimit,
-        registration_seed: 1,
-        min_observability: 0.0,
-        stop_risk: activesense_core::pipeline::DEFAULT_STOP_RISK,
+        config: EpisodeConfig::default(),
     };
-    if runner
-        .start(&plan, &params, EpisodeConfig::default(), 0b101)
-        .is_err()
-    {
+    if runner.start(&plan, &params).is_err() {
         return;
     }
     let mut scratch = Box::new(Scratch::new());

@@ -49,7 +49,7 @@ pub struct CalibrateArgs {
     #[arg(long, default_value_t = 1e-3)]
     pub ridge: f64,
     /// Where to write the fitted models as Rust source (the file the core compiles).
-    #[arg(long, default_value = "core-nostd/src/stop_calibration.rs")]
+    #[arg(long, default_value = "core-nostd/src/stop/calibration.rs")]
     pub rust_out: PathBuf,
     /// Directory of the report (calibration.md, calibration.json).
     #[arg(long, default_value = "results/calibration")]

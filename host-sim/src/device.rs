@@ -82,19 +82,7 @@ pub fn sim_episode(spec: &EpisodeSpec) -> (FloorPlan, EpisodeParams, SimInstrume
     let mut world = SimWorld::new(plan.clone(), spec.sensor, spec.config, spec.world_seed());
     let initial_scan = world.scan();
     let truth = world.truth();
-    let params = EpisodeParams {
-        agent: spec.agent,
-        seed: spec.agent_seed(),
-        steps_per_turn: spec.config.steps_per_turn,
-        max_actions: spec.config.max_actions,
-        rot_bins: spec.rot_bins,
-        known_heading: (spec.rot_bins == 1).then_some(truth.theta),
-        ground_truth: Some(truth),
-        initial_scan,
-        termination: spec.termination,
-        stop_risk: spec.config.stop_risk,
-        min_observability: spec.config.min_observability,
-    };
+    let params = spec.params(truth, initial_scan);
     (plan, params, SimInstrument::new(world))
 }
 

@@ -16,9 +16,9 @@ use crate::plans;
 use crate::sensor::{RangeKind, SensorModel};
 use crate::world::{Placement, SimWorld};
 use activesense_core::agents::{Action, AgentKind, BaselineAgent};
-use activesense_core::episode::{EpisodeConfig, EpisodeState};
+use activesense_core::episode::{EpisodeConfig, EpisodeParams, EpisodeState};
 pub use activesense_core::pipeline::Termination;
-use activesense_core::pipeline::{self, PipelineParams, PipelineResult, Stop};
+use activesense_core::pipeline::{PipelineResult, Stop};
 use activesense_core::policy::Policy;
 use activesense_core::pose_distance::PoseDistance;
 use activesense_core::registration::Registration;
@@ -81,10 +81,23 @@ impl EpisodeSpec {
         }
     }
 
-    /// Seed of the registration's perturbation stream (derived from the agent seed, which
-    /// is all the device is told).
-    pub fn registration_seed(&self) -> u64 {
-        pipeline::registration_seed(self.agent_seed())
+    /// The one conversion of an episode's description into the core's parameters (the
+    /// in-process episode, the emulated and remote devices, calibration and training all
+    /// use it): the ground truth is supplied for the oracle rule and the `recognised`
+    /// statistic, K = 1 is told the true heading, and the registration seed derives from
+    /// the agent seed ([`EpisodeParams::registration_seed`]), which is all the device is
+    /// told.
+    pub fn params(&self, truth: Pose2, initial_scan: u32) -> EpisodeParams {
+        EpisodeParams {
+            agent: self.agent,
+            seed: self.agent_seed(),
+            rot_bins: self.rot_bins,
+            known_heading: (self.rot_bins == 1).then_some(truth.theta),
+            ground_truth: Some(truth),
+            initial_scan,
+            termination: self.termination,
+            config: self.config,
+        }
     }
 
     /// Seed of the world stream.
@@ -252,20 +265,6 @@ pub struct Trajectory {
     pub inspection: Option<InspectionHeader>,
 }
 
-/// The pipeline parameters of an episode (the ground truth is supplied for the oracle
-/// rule and the `recognised` statistic; K = 1 is told the true heading).
-pub fn pipeline_params(spec: &EpisodeSpec, truth: &Pose2) -> PipelineParams {
-    PipelineParams {
-        rot_bins: spec.rot_bins,
-        known_heading: (spec.rot_bins <= 1).then_some(truth.theta),
-        ground_truth: Some(*truth),
-        termination: spec.termination,
-        registration_seed: spec.registration_seed(),
-        min_observability: spec.config.min_observability,
-        stop_risk: spec.config.stop_risk,
-    }
-}
-
 /// Runs one episode of a Table-3 baseline (`spec.agent`, seeded from the spec) to its
 /// end, registers, scores and records it. Other agents go through [`run_episode_with`].
 pub fn run_episode(spec: &EpisodeSpec) -> Trajectory {
@@ -284,12 +283,7 @@ pub fn start_episode(spec: &EpisodeSpec, runner: &mut EpisodeRunner) -> (FloorPl
     // were started once when loaded (`planfile::fits_pipeline`), and the parameters are
     // complete by construction, so a failure here is a bug, not bad input.
     runner
-        .start(
-            &plan,
-            &pipeline_params(spec, &truth),
-            spec.config,
-            initial_scan,
-        )
+        .start(&plan, &spec.params(truth, initial_scan))
         .expect("generated plan fits the pipeline");
     (plan, world, initial_scan)
 }

@@ -16,9 +16,10 @@
 //! one-line message starts with the file (and room) and names the vertex or entity at
 //! fault; nothing here panics on bad input.
 
-use activesense_core::episode::EpisodeConfig;
+use activesense_core::agents::AgentKind;
+use activesense_core::episode::{EpisodeConfig, EpisodeParams};
 use activesense_core::geometry::v2;
-use activesense_core::pipeline::{PipelineParams, Termination};
+use activesense_core::pipeline::Termination;
 use activesense_core::runner::EpisodeRunner;
 use activesense_core::{FloorPlan, PlanError, Pose2, MAX_VERTICES};
 use serde::{Deserialize, Serialize};
@@ -495,17 +496,19 @@ fn validate(
 fn fits_pipeline(plan: &FloorPlan) -> Result<(), String> {
     let mut runner = Box::new(EpisodeRunner::new_empty());
     for rot_bins in [1u8, 10] {
-        let params = PipelineParams {
+        // No `EpisodeSpec` here (it would import this module back): the core's type as is.
+        let params = EpisodeParams {
+            agent: AgentKind::Blind0,
+            seed: 0,
             rot_bins,
             known_heading: (rot_bins == 1).then_some(0.0),
             ground_truth: Some(Pose2::new(0.0, 0.0, 0.0)),
+            initial_scan: 0,
             termination: Termination::Oracle,
-            registration_seed: 0,
-            min_observability: 0.0,
-            stop_risk: activesense_core::pipeline::DEFAULT_STOP_RISK,
+            config: EpisodeConfig::default(),
         };
         runner
-            .start(plan, &params, EpisodeConfig::default(), 0)
+            .start(plan, &params)
             .map_err(|e| format!("the localizer cannot take this room: {e:?}"))?;
     }
     Ok(())

@@ -478,19 +478,8 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                         SimWorld::new(plan.clone(), spec.sensor, spec.config, world_seed);
                     let initial_scan = world.scan();
                     let truth = world.truth();
-                    let params = EpisodeParams {
-                        agent: spec.agent,
-                        seed: spec.agent_seed() ^ i as u64,
-                        steps_per_turn: spec.config.steps_per_turn,
-                        max_actions: spec.config.max_actions,
-                        rot_bins: spec.rot_bins,
-                        known_heading: (spec.rot_bins == 1).then_some(truth.theta),
-                        ground_truth: Some(truth),
-                        initial_scan,
-                        termination: spec.termination,
-                        stop_risk: spec.config.stop_risk,
-                        min_observability: spec.config.min_observability,
-                    };
+                    let mut params = spec.params(truth, initial_scan);
+                    params.seed ^= i as u64;
                     (plan.clone(), params, SimInstrument::new(world))
                 };
                 let (p, params, inst) = mk();

@@ -5,11 +5,11 @@
 //! in-process run and to the lead's episode runner) and [`fault_suite`] (every documented
 //! error, after which the device serves the next request/session).
 
-use activesense_core::agents::{Action, AgentKind};
 use activesense_core::episode::Observation;
-use activesense_core::floorplan::PlanError;
-use activesense_core::pipeline::Termination;
-use activesense_core::wire::*;
+use activesense_core::episode::Termination;
+use activesense_core::episode::{Action, AgentKind};
+use activesense_core::protocol::*;
+use activesense_core::world::floorplan::PlanError;
 use activesense_sim::device::sim_episode;
 use activesense_sim::episode::{EndReason, EpisodeSpec, Trajectory};
 use activesense_sim::learn::agent::{run_agent_episode, Int8Policy, Policies};
@@ -274,7 +274,7 @@ pub fn fault_suite<T: Read + Write>(c: &mut Client<T>) {
     for risk in [f32::NAN, 0.0, 1.5] {
         let mut p = params;
         p.termination = Termination::Confident;
-        p.stop_risk = risk;
+        p.config.stop_risk = risk;
         assert_eq!(
             device_err(c.call(&Request::StartEpisode(p))),
             WireError::InvalidParams(ParamError::InvalidStopRisk),
@@ -283,7 +283,7 @@ pub fn fault_suite<T: Read + Write>(c: &mut Client<T>) {
     }
     for tau in [-1.0, f32::NAN] {
         let mut p = params;
-        p.min_observability = tau;
+        p.config.min_observability = tau;
         assert_eq!(
             device_err(c.call(&Request::StartEpisode(p))),
             WireError::InvalidParams(ParamError::InvalidObservability),
@@ -291,7 +291,7 @@ pub fn fault_suite<T: Read + Write>(c: &mut Client<T>) {
         );
     }
     let mut p = params;
-    p.max_actions = 20;
+    p.config.max_actions = 20;
     p.agent = AgentKind::Heuristic0; // step 0 is a measurement
     assert_eq!(
         c.call(&Request::StartEpisode(p)).unwrap(),
@@ -422,8 +422,8 @@ pub fn other_k1_blob() -> Vec<u8> {
 /// refused and the uploaded policy keeps serving; an episode cancels a staged upload;
 /// `Reset` brings the built-in policy back.
 pub fn policy_upload_suite<T: Read + Write>(client: &mut Client<T>) {
-    use activesense_core::builtin;
-    use activesense_core::quantized::stored_crc;
+    use activesense_core::policy::builtin;
+    use activesense_core::policy::int8::stored_crc;
     client.hello().expect("hello");
     let before = client.policy_info(1).expect("info");
     assert_eq!(before.source, PolicySource::BuiltIn);

@@ -1,8 +1,8 @@
 //! In-process loopback: the host client and the core device session (in a thread) over an
 //! in-memory pipe.
 
-use activesense_core::session::{Session, SessionConfig};
-use activesense_core::wire::Phase;
+use activesense_core::device::{Session, SessionConfig};
+use activesense_core::protocol::Phase;
 use activesense_sim::device::{serve_std, Pipe, HOST_DEVICE};
 use activesense_sim::link::{self, Client, LinkSpec};
 use activesense_tests::{
@@ -104,7 +104,7 @@ fn device_survives_hosts_that_disappear() {
         c.hello().unwrap();
         let (plan, params, _) = activesense_sim::device::sim_episode(&spec(0, 10));
         c.load_plan(&plan).unwrap();
-        c.call(&activesense_core::wire::Request::StartEpisode(params))
+        c.call(&activesense_core::protocol::Request::StartEpisode(params))
             .unwrap();
     });
     serve_std(&mut session, &mut dev).unwrap();
@@ -118,13 +118,13 @@ fn device_survives_hosts_that_disappear() {
         c.hello().unwrap();
         let (plan, params, _) = activesense_sim::device::sim_episode(&spec(1, 1));
         c.load_plan(&plan).unwrap();
-        c.call(&activesense_core::wire::Request::StartEpisode(params))
+        c.call(&activesense_core::protocol::Request::StartEpisode(params))
             .unwrap();
         std::thread::sleep(Duration::from_millis(600));
     });
     serve_std(&mut session, &mut dev).unwrap();
     t.join().unwrap();
-    assert_eq!(session.phase(), activesense_core::wire::Phase::Closed);
+    assert_eq!(session.phase(), activesense_core::protocol::Phase::Closed);
     assert_eq!(session.stats().timeouts, 1);
 
     // Host 3 is served normally.

@@ -3,7 +3,7 @@
 //! code path without hardware.
 #![cfg(unix)]
 
-use activesense_core::session::{ServeEnd, Session};
+use activesense_core::device::{ServeEnd, Session};
 use activesense_sim::device::{serve_std, HOST_DEVICE};
 use activesense_sim::link::Client;
 use activesense_tests::{check_episodes, fault_suite};

@@ -41,9 +41,9 @@ fn qemu_instruction_counts_reproducible() {
         elf: firmware_elf(),
         episodes: 2,
         first_seed: TEST_SEEDS.start,
-        agent: activesense_core::agents::AgentKind::Heuristic1,
+        agent: activesense_core::episode::AgentKind::Heuristic1,
         episode_seed: 0,
-        termination: activesense_core::pipeline::Termination::Oracle,
+        termination: activesense_core::episode::Termination::Oracle,
         timeout_ms: 20_000,
     };
     let a = mcu_bench(&args).expect("first run");

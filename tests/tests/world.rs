@@ -2,7 +2,7 @@
 //! baseline sampling agents"): every generated plan is valid, inside the documented extents
 //! and reproducible byte for byte; ray casts agree with closed-form answers.
 
-use activesense_core::geometry::{unit, v2};
+use activesense_core::world::geometry::{unit, v2};
 use activesense_core::FloorPlan;
 use activesense_sim::plans::{
     self, generate, MAX_GEN_VERTICES, MAX_SIDE, MIN_SIDE, MIN_VERTICES, TEST_SEEDS, TRAIN_SEEDS,

@@ -111,7 +111,8 @@ pub fn report(elf: &Path) -> Result<()> {
         RAM_BUDGET / 1024
     );
     {
-        use activesense_core::{builtin, quantized, session};
+        use activesense_core::device::POLICY_SLOT_BYTES;
+        use activesense_core::policy::{builtin, int8};
         let blobs = builtin::K1.len() + builtin::K10.len();
         println!(
             "of which the learnt policy: flash {} bytes (int8 blobs K = 1: {}, K = 10: {}); \
@@ -119,9 +120,9 @@ pub fn report(elf: &Path) -> Result<()> {
             blobs,
             builtin::K1.len(),
             builtin::K10.len(),
-            quantized::SCRATCH_BYTES + session::POLICY_SLOT_BYTES,
-            quantized::SCRATCH_BYTES,
-            session::POLICY_SLOT_BYTES
+            int8::SCRATCH_BYTES + POLICY_SLOT_BYTES,
+            int8::SCRATCH_BYTES,
+            POLICY_SLOT_BYTES
         );
     }
     if s.flash > FLASH_BUDGET {

@@ -40,14 +40,14 @@
 //! The staging area ([`GhtLocalizer::stage`]) runs the same vote into the scratch layer and
 //! folds it into an entropy sum without writing the accumulator.
 
-use crate::geometry::{unit, Vec2};
-use crate::math::{cos, exp, ln};
+use crate::world::math::{exp, ln};
 use crate::{FloorPlan, Pose2};
 use heapless::Vec as HVec;
 use serde::{Deserialize, Serialize};
 
 use super::grid::{self, CellIndex, GridSpec, Mode};
 use super::rtable::RTable;
+use super::vote::{vote_layer, EntropyAcc};
 use super::{
     Confidence, LocError, LocalizerConfig, MAX_CELLS, MAX_LAYER_CELLS, MAX_RTABLE_POINTS,
     MAX_SUB_BINS,
@@ -85,7 +85,7 @@ pub const FINE_SUB_BINS: u8 = 32;
 pub const VOTE_QUANTA: u8 = 16;
 
 /// Table index per unit of `q`.
-const KERNEL_SCALE: f32 = (KERNEL_LEN - 1) as f32 / KERNEL_Q_MAX;
+pub(super) const KERNEL_SCALE: f32 = (KERNEL_LEN - 1) as f32 / KERNEL_Q_MAX;
 
 /// Entries of the vote-kernel table (`q = 0 ..= KERNEL_Q_MAX`).
 pub const KERNEL_LEN: usize = 129;
@@ -96,7 +96,7 @@ pub const KERNEL_Q_MAX: f32 = 3.5;
 /// `≤ e^{−λ·REBASE/Q}`, `e^{−18}` at the default λ).
 const REBASE: u8 = 128;
 /// Exponent table length: differences to the reference of `0..=255 + Q` quanta.
-const QTAB_LEN: usize = 256 + VOTE_QUANTA as usize;
+pub(super) const QTAB_LEN: usize = 256 + VOTE_QUANTA as usize;
 
 const _: () = assert!(MAX_SUB_BINS >= TRACKED_SUB_BINS);
 
@@ -222,7 +222,7 @@ impl GhtLocalizer {
     /// Sets the known heading for `K = 1` (new episode on the same plan; clears the votes).
     pub fn set_known_heading(&mut self, h: f32) {
         self.cfg.known_heading = h;
-        self.grid.known_heading = crate::math::wrap_angle(h);
+        self.grid.known_heading = crate::world::math::wrap_angle(h);
         self.clear();
     }
 
@@ -703,142 +703,4 @@ impl Default for GhtLocalizer {
     fn default() -> Self {
         Self::new_empty()
     }
-}
-
-/// Running `Z = Σq`, `S = Σ q ln q` over the interior cells in a fixed order; `H = ln Z −
-/// S/Z`. With `λ > 0`, `q = exp(−λ·k/Q)` for a cell `k` quanta below the reference (table
-/// lookup, `ln q = −λk/Q`); with `λ = 0`, `q` = the cell's weight. Committed and staged
-/// entropy share it.
-struct EntropyAcc {
-    gain: f32,
-    z: f32,
-    s: f32,
-}
-
-impl EntropyAcc {
-    fn new(gain: f32) -> Self {
-        EntropyAcc {
-            gain,
-            z: 0.0,
-            s: 0.0,
-        }
-    }
-
-    /// A cell `below` quanta under the reference whose absolute level is `level` quanta.
-    #[inline]
-    fn add(&mut self, qtab: &[f32; QTAB_LEN], below: u16, level: u32) {
-        if self.gain > 0.0 {
-            let k = (below as usize).min(QTAB_LEN - 1);
-            let q = qtab[k];
-            self.z += q;
-            self.s += q * (-self.gain * k as f32 / VOTE_QUANTA as f32);
-        } else if level > 0 {
-            let v = level as f32 / VOTE_QUANTA as f32;
-            self.z += v;
-            self.s += v * ln(v);
-        }
-    }
-
-    fn entropy(&self, uniform: f32) -> f32 {
-        if self.z <= 0.0 {
-            uniform
-        } else {
-            (ln(self.z) - self.s / self.z).max(0.0)
-        }
-    }
-}
-
-/// Algorithms 1 and 2 for one rotation bin: fills `scratch` (one layer) with the
-/// max-combined votes of measurement `(bearing, range)`; returns the number of votes.
-#[allow(clippy::too_many_arguments)]
-fn vote_layer(
-    grid: &GridSpec,
-    cfg: &LocalizerConfig,
-    rtable: &RTable,
-    interior: &[bool; MAX_LAYER_CELLS],
-    kernel: &[u8; KERNEL_LEN],
-    scratch: &mut [u8],
-    bin: u8,
-    subs: (u8, u8),
-    bearing: f32,
-    range: f32,
-    window: Option<(i32, i32)>,
-) -> u32 {
-    scratch.fill(0);
-    let nx = grid.nx as i32;
-    let ny = grid.ny as i32;
-    let (cw, ch) = (grid.cell[0], grid.cell[1]);
-    let (inv_w, inv_h) = (1.0 / cw, 1.0 / ch);
-    let (x0, y0) = (grid.origin[0], grid.origin[1]);
-    let sg = 0.5 * cw.max(ch);
-    let sub = cfg.effective_sub_bins();
-    let delta = if grid.rot_bins > 1 {
-        grid.bin_width() / sub as f32
-    } else {
-        0.0
-    };
-    let rd = range * delta;
-    let k_par = 0.5 / (sg * sg + cfg.range_sigma * cfg.range_sigma);
-    let k_perp = 0.5 / (sg * sg + rd * rd / 12.0);
-    let cos_min = cos(cfg.max_incidence);
-    let spread = cfg.spread as i32;
-    let mut votes = 0u32;
-    for s in subs.0..subs.1.min(sub) {
-        let h = if grid.rot_bins > 1 {
-            bin as f32 * grid.bin_width() - 0.5 * grid.bin_width() + (s as f32 + 0.5) * delta
-        } else {
-            grid.known_heading
-        };
-        let u: Vec2 = unit(h + bearing);
-        let (ux, uy) = (u.x, u.y);
-        let (ox, oy) = (range * ux, range * uy);
-        for p in rtable.points() {
-            // Algorithm 1: incidence precondition.
-            if ux * p.n[0] + uy * p.n[1] < cos_min {
-                continue;
-            }
-            let ax = p.m[0] - ox;
-            let ay = p.m[1] - oy;
-            let fx = (ax - x0) * inv_w;
-            let fy = (ay - y0) * inv_h;
-            // Algorithm 1: hypothesised agent inside the model (grid, then interior mask).
-            if !(fx >= 0.0 && fy >= 0.0 && fx < nx as f32 && fy < ny as f32) {
-                continue;
-            }
-            let (cx, cy) = (fx as i32, fy as i32);
-            if !interior[(cy * nx + cx) as usize] {
-                continue;
-            }
-            // A vote reaches cells within `spread` of its own: one that cannot reach the
-            // 3 × 3 window around `window` is skipped (the window's values stay exact).
-            if let Some((wx, wy)) = window {
-                if (cx - wx).abs() > spread + 1 || (cy - wy).abs() > spread + 1 {
-                    continue;
-                }
-            }
-            votes += 1;
-            // Algorithm 2: weighted vote into the neighbourhood.
-            for jy in (cy - spread).max(0)..=(cy + spread).min(ny - 1) {
-                let dy = y0 + (jy as f32 + 0.5) * ch - ay;
-                for jx in (cx - spread).max(0)..=(cx + spread).min(nx - 1) {
-                    let idx = (jy * nx + jx) as usize;
-                    if !interior[idx] {
-                        continue;
-                    }
-                    let dx = x0 + (jx as f32 + 0.5) * cw - ax;
-                    let par = dx * ux + dy * uy;
-                    let perp = ux * dy - uy * dx;
-                    // exp(−q), quantised, from the table (nearest entry; 0 beyond the end).
-                    let q = par * par * k_par + perp * perp * k_perp;
-                    let k = (q * KERNEL_SCALE + 0.5) as usize;
-                    if let Some(&wq) = kernel.get(k) {
-                        if wq > scratch[idx] {
-                            scratch[idx] = wq;
-                        }
-                    }
-                }
-            }
-        }
-    }
-    votes
 }

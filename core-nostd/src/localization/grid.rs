@@ -16,8 +16,8 @@
 //!   (the scene→model transform), [`GridSpec::pose_of`].
 //! * Memory layout: `index = (bin·Ny + iy)·Nx + ix` (one `Nx × Ny` layer per rotation bin).
 
-use crate::geometry::{rotate, v2, Vec2};
-use crate::math::{abs, ln, round, wrap_angle, wrap_positive, TAU};
+use crate::world::geometry::{rotate, v2, Vec2};
+use crate::world::math::{abs, ln, round, wrap_angle, wrap_positive, TAU};
 use crate::Pose2;
 use heapless::Vec as HVec;
 use serde::{Deserialize, Serialize};

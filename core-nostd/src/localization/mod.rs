@@ -34,6 +34,7 @@
 pub mod ght;
 pub mod grid;
 pub mod rtable;
+mod vote;
 
 pub use ght::{GhtLocalizer, Staged, VoteStats};
 pub use grid::{CellIndex, GridSpec, Mode};
@@ -42,12 +43,7 @@ pub use rtable::{RPoint, RTable};
 use crate::PlanError;
 use serde::{Deserialize, Serialize};
 
-/// Largest number of translation cells along x.
-pub const MAX_NX: usize = 30;
-/// Largest number of translation cells along y.
-pub const MAX_NY: usize = 30;
-/// Largest number of rotation bins.
-pub const MAX_ROT_BINS: usize = 10;
+pub use crate::limits::{MAX_NX, MAX_NY, MAX_ROT_BINS};
 /// Cells of one rotation layer at capacity.
 pub const MAX_LAYER_CELLS: usize = MAX_NX * MAX_NY;
 /// Cells of the whole grid at capacity.

@@ -15,8 +15,8 @@
 //! per update, rotating the *table* would cost `4 D` multiplications per hypothesis;
 //! storing it all would save nothing at run time.
 
-use crate::geometry::length;
-use crate::math::floor;
+use crate::world::geometry::length;
+use crate::world::math::floor;
 use crate::FloorPlan;
 
 use super::{LocError, MAX_RTABLE_POINTS};

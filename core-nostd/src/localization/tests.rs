@@ -1,8 +1,8 @@
 //! Unit tests of the GHT localizer on hand-written rooms.
 
 use super::*;
-use crate::geometry::{length, rotate, unit, v2, Vec2};
-use crate::math::{cos, ln, sqrt, TAU};
+use crate::world::geometry::{length, rotate, unit, v2, Vec2};
+use crate::world::math::{cos, ln, sqrt, TAU};
 use crate::{FloorPlan, Pose2};
 use core::f32::consts::PI;
 use rand_core::{RngCore, SeedableRng};
@@ -247,7 +247,7 @@ fn clear_of_cell_edges(g: &GridSpec, t: &Pose2) -> bool {
     let fx = (t.x - g.origin[0]) / g.cell[0];
     let fy = (t.y - g.origin[1]) / g.cell[1];
     let edge = |f: f32| {
-        let r = f - crate::math::floor(f);
+        let r = f - crate::world::math::floor(f);
         (0.15..=0.85).contains(&r)
     };
     edge(fx) && edge(fy)

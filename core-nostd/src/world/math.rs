@@ -85,6 +85,16 @@ pub fn wrap_positive(a: f32) -> f32 {
     }
 }
 
+/// SplitMix64 finaliser (Steele, Lea & Flood 2014): decorrelates nearby seeds. The one
+/// seed-derivation function of the project: the core derives the registration seed from
+/// the agent seed with it, the host its world and agent streams.
+pub const fn splitmix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

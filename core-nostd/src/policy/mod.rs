@@ -22,10 +22,16 @@
 //! The features are `f32` computed with plain arithmetic and `libm`, so the host and the
 //! Cortex-M4F compute the same bits.
 
-use crate::agents::{Action, BaselineAgent};
+pub mod baselines;
+pub mod builtin;
+pub mod int8;
+
+pub use baselines::BaselineAgent;
+
+use crate::episode::Action;
 use crate::episode::SCAN_PIXELS;
 use crate::localization::{GhtLocalizer, MAX_NX, MAX_NY};
-use crate::math::{cos, sin};
+use crate::world::math::{cos, sin};
 
 /// Side of the belief map the policy sees (cells per axis).
 pub const BELIEF_SIDE: usize = MAX_NX;
@@ -99,7 +105,7 @@ impl Default for History {
 }
 
 /// Everything a policy may look at before choosing an action. Built by
-/// [`crate::runner::EpisodeRunner::input`]; a policy never sees the ground truth.
+/// [`crate::pipeline::runner::EpisodeRunner::input`]; a policy never sees the ground truth.
 #[derive(Clone, Copy)]
 pub struct PolicyInput<'a> {
     /// The GHT localizer holding the belief.
@@ -135,12 +141,12 @@ impl PolicyInput<'_> {
     }
 
     /// The belief map of [`PolicyInput::write_belief`], each value quantised on the way
-    /// with [`crate::quantized::quantize_value`] (`scale`, `zero_point`): exactly the
+    /// with [`crate::policy::int8::quantize_value`] (`scale`, `zero_point`): exactly the
     /// quantisation of the float map, without a `K × 900` float buffer (36 KB at K = 10,
     /// too much for the instrument). Returns the values written, or 0 as `write_belief`.
     pub fn write_belief_q(&self, out: &mut [i8], scale: f32, zero_point: i32) -> usize {
-        let p = crate::quantized::QuantParams { scale, zero_point };
-        let q = |v| crate::quantized::quantize_value(v, p);
+        let p = crate::policy::int8::QuantParams { scale, zero_point };
+        let q = |v| crate::policy::int8::quantize_value(v, p);
         self.fill_belief(out, q(0.0), q)
     }
 
@@ -247,8 +253,8 @@ impl Policy for BaselineAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::unit;
     use crate::localization::LocalizerConfig;
+    use crate::world::geometry::unit;
 
     #[test]
     fn belief_map_is_probability_over_peak_bit_for_bit() {

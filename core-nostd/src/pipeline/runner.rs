@@ -1,6 +1,6 @@
 //! The one episode loop (paper Fig. 1, §3.1): policy → action → observation → localizer →
 //! termination, then refinement. The host simulator, the evaluation harness, the trainer
-//! and the instrument's [`crate::session::Controller`] all drive an [`EpisodeRunner`], so a
+//! and the instrument's [`crate::device::Controller`] all drive an [`EpisodeRunner`], so a
 //! policy sees bit-identical [`PolicyInput`]s wherever it runs and an episode takes the
 //! same actions on the host and on the device.
 //!
@@ -15,16 +15,11 @@
 //! [`EpisodeRunner::observe`] validates and books the answer. [`EpisodeRunner::is_over`]
 //! turns true on a stop or at the action limit; [`EpisodeRunner::finish`] registers.
 
-use crate::agents::Action;
-use crate::episode::{EpisodeConfig, EpisodeState, Observation, SCAN_PIXELS};
-use crate::floorplan::FloorPlan;
-use crate::pipeline::{Pipeline, PipelineError, PipelineParams, PipelineResult, Stop};
+use crate::episode::Action;
+use crate::episode::{EpisodeConfig, EpisodeParams, EpisodeState, Observation, ObservationError};
+use crate::pipeline::{Pipeline, PipelineError, PipelineResult, Stop};
 use crate::policy::{History, Policy, PolicyInput};
-use crate::registration::MAX_OBSERVATIONS;
-use crate::wire::{ObservationError, MAX_EPISODE_ACTIONS};
-
-// Every measurement of the longest episode reaches the registration: none is dropped.
-const _: () = assert!(MAX_OBSERVATIONS >= MAX_EPISODE_ACTIONS as usize);
+use crate::world::floorplan::FloorPlan;
 
 /// What booking an observation did to the episode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,16 +54,7 @@ impl EpisodeRunner {
         EpisodeRunner {
             pipeline: Pipeline::new_empty(),
             state: EpisodeState {
-                config: EpisodeConfig {
-                    steps_per_turn: crate::episode::DEFAULT_STEPS_PER_TURN,
-                    max_actions: crate::episode::EVAL_MAX_ACTIONS,
-                    costs: crate::agents::ActionCosts {
-                        rotate: 0.005,
-                        measure: 0.05,
-                    },
-                    min_observability: 0.0,
-                    stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
-                },
+                config: EpisodeConfig::DEFAULT,
                 bearing_index: 0,
                 actions: 0,
                 measurements: 0,
@@ -82,24 +68,16 @@ impl EpisodeRunner {
         }
     }
 
-    /// Starts an episode on the centred `plan`; `initial_scan` is the scan before the
-    /// first action.
-    pub fn start(
-        &mut self,
-        plan: &FloorPlan,
-        params: &PipelineParams,
-        config: EpisodeConfig,
-        initial_scan: u32,
-    ) -> Result<(), PipelineError> {
+    /// Starts an episode on the centred `plan` under `params` (its `config` fixes the
+    /// rotation step, action limit and costs; its `initial_scan` is the scan before the
+    /// first action).
+    pub fn start(&mut self, plan: &FloorPlan, params: &EpisodeParams) -> Result<(), PipelineError> {
         self.pipeline.start(plan, params)?;
-        self.state = EpisodeState::new(config);
-        self.history.start(initial_scan);
+        self.state = EpisodeState::new(params.config);
+        self.history.start(params.initial_scan);
         self.stop = None;
         self.no_returns = 0;
-        self.heading_offset = match (params.rot_bins <= 1, params.known_heading) {
-            (true, Some(h)) => h,
-            _ => 0.0,
-        };
+        self.heading_offset = params.heading();
         Ok(())
     }
 
@@ -131,21 +109,7 @@ impl EpisodeRunner {
 
     /// Checks an instrument answer to `action` without booking it.
     pub fn validate(action: Action, obs: &Observation) -> Result<(), ObservationError> {
-        if obs.scan >> SCAN_PIXELS != 0 {
-            return Err(ObservationError::ScanBits);
-        }
-        if let Some(range) = obs.range {
-            if action != Action::Measure {
-                return Err(ObservationError::RangeOnRotation);
-            }
-            if !range.is_finite() {
-                return Err(ObservationError::NonFiniteRange);
-            }
-            if range < 0.0 {
-                return Err(ObservationError::NegativeRange);
-            }
-        }
-        Ok(())
+        obs.validate(action)
     }
 
     /// Books the instrument's answer to `action`: encoder bearing, counts and cost, the
@@ -219,9 +183,11 @@ impl EpisodeRunner {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::agents::{AgentKind, BaselineAgent};
-    use crate::geometry::v2;
+    use crate::episode::AgentKind;
+    use crate::limits::SCAN_PIXELS;
     use crate::pipeline::Termination;
+    use crate::policy::BaselineAgent;
+    use crate::world::geometry::v2;
 
     #[test]
     fn rejects_bad_answers_and_keeps_state() {
@@ -229,17 +195,21 @@ mod tests {
             .unwrap()
             .centered();
         let mut r = EpisodeRunner::new_empty();
-        let params = PipelineParams {
+        let params = EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 1,
             rot_bins: 10,
             known_heading: None,
             ground_truth: None,
+            initial_scan: 0,
             termination: Termination::ActionLimit,
-            registration_seed: 1,
-            min_observability: 0.0,
-            stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
+            config: EpisodeConfig {
+                min_observability: 0.0,
+                stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
+                ..EpisodeConfig::DEFAULT
+            },
         };
-        r.start(&plan, &params, EpisodeConfig::default(), 0)
-            .unwrap();
+        r.start(&plan, &params).unwrap();
         let mut agent = BaselineAgent::new(AgentKind::Heuristic1, 1);
         assert_eq!(r.decide(&mut agent), Some(Action::Measure));
         let bad = [

@@ -10,17 +10,17 @@
 //!   [`DelayNs`]) turns the bearing; the EDM sits on its own UART ([`embedded_io`]).
 //!   Host-tested against `embedded-hal-mock` (see the tests below).
 //! * The *remote* instrument: in simulation the host plays the sensors over the serial link.
-//!   On the device this is the [`crate::session`] state machine itself (its `Act` replies
+//!   On the device this is the [`crate::device`] state machine itself (its `Act` replies
 //!   are the action requests); on the host, the simulated world implements this trait and
 //!   answers them (`activesense_sim::link`).
 //!
 //! [`run_local`] runs a whole episode against any `Instrument` in-process (the firmware's
 //! stand-alone mode on real hardware, and the reference run the link tests compare to).
 
-use crate::agents::Action;
+use crate::device::{Controller, Step};
+use crate::episode::Action;
 use crate::episode::{Observation, SCAN_PIXELS};
-use crate::session::{Controller, Step};
-use crate::wire::{EpisodeParams, EpisodeReport, WireError};
+use crate::protocol::{EpisodeParams, EpisodeReport, WireError};
 use crate::FloorPlan;
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;

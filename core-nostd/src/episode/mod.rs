@@ -1,4 +1,10 @@
-//! Episode bookkeeping shared by the host runner and the firmware session (§3.1, §4.2).
+//! What an episode is (§3.1, §4.2), shared by the host runner and the firmware session:
+//! the actions and their costs ([`actions`]), what the instrument reports ([`Observation`],
+//! [`ObservationError`]), the episode's fixed configuration ([`EpisodeConfig`]), THE one
+//! parameter type of an episode ([`EpisodeParams`], in [`params`]: what the host sends in
+//! `StartEpisode` and what [`crate::pipeline::Pipeline::start`] takes) and the
+//! instrument-side bookkeeping ([`EpisodeState`]). Imports only [`crate::limits`] and
+//! [`crate::world`].
 //!
 //! An episode is a sequence of discrete actions (rotate-left, rotate-right, measure), each
 //! with a cost, until the coarse localization succeeds or the action limit is reached.
@@ -6,20 +12,18 @@
 //! number of rotation steps), the counts and the accumulated cost. It does not know the
 //! ground truth. Both sides use it, so host and device agree on every bearing bit for bit.
 
-use crate::agents::{Action, ActionCosts};
-use crate::math::{wrap_angle, TAU};
+pub mod actions;
+pub mod params;
+
+pub use crate::limits::{DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS, SCAN_PIXELS, TRAIN_MAX_ACTIONS};
+pub use actions::{Action, ActionCosts, AgentKind};
+pub use params::{registration_seed, EpisodeParams, ParamError, Termination};
+
+use crate::world::math::{wrap_angle, TAU};
 use serde::{Deserialize, Serialize};
 
-/// Pixels in one topological scan (§4.1).
-pub const SCAN_PIXELS: usize = 20;
 /// Field of view of one topological scan (§4.1): 45°.
 pub const SCAN_FOV: f32 = core::f32::consts::FRAC_PI_4;
-/// Default rotation steps per full turn (rotation step 2π/54, §4.2 / Table 3).
-pub const DEFAULT_STEPS_PER_TURN: u16 = 54;
-/// Action limit used for evaluation (Table 4).
-pub const EVAL_MAX_ACTIONS: u16 = 100;
-/// Action limit used for training (§4.2).
-pub const TRAIN_MAX_ACTIONS: u16 = 500;
 
 /// What the instrument reports after one action.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -32,7 +36,40 @@ pub struct Observation {
     pub scan: u32,
 }
 
+/// Why an observation was rejected (the episode stays at the same step).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ObservationError {
+    /// The range is NaN or infinite.
+    NonFiniteRange,
+    /// The range is negative.
+    NegativeRange,
+    /// A rotation action reported a range.
+    RangeOnRotation,
+    /// Scan bits beyond [`SCAN_PIXELS`] are set.
+    ScanBits,
+}
+
 impl Observation {
+    /// Checks an instrument answer to `action`: no scan bits beyond [`SCAN_PIXELS`], a
+    /// range only after a measurement, and then finite and not negative.
+    pub fn validate(&self, action: Action) -> Result<(), ObservationError> {
+        if self.scan >> SCAN_PIXELS != 0 {
+            return Err(ObservationError::ScanBits);
+        }
+        if let Some(range) = self.range {
+            if action != Action::Measure {
+                return Err(ObservationError::RangeOnRotation);
+            }
+            if !range.is_finite() {
+                return Err(ObservationError::NonFiniteRange);
+            }
+            if range < 0.0 {
+                return Err(ObservationError::NegativeRange);
+            }
+        }
+        Ok(())
+    }
+
     /// Packs scan pixels into the bit mask.
     pub fn pack_scan(pixels: &[bool; SCAN_PIXELS]) -> u32 {
         pixels
@@ -52,17 +89,18 @@ pub struct EpisodeConfig {
     /// Per-action costs.
     pub costs: ActionCosts,
     /// The pipeline's observability stop test
-    /// ([`crate::pipeline::PipelineParams::min_observability`]); 0 = off (the default; the
+    /// ([`crate::pipeline::Pipeline::observability`]); 0 = off (the default; the
     /// protocol carries it since v4, so the instrument runs the same). Left out of JSON when 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub min_observability: f32,
-    /// The confident stop's risk ([`crate::pipeline::PipelineParams::stop_risk`]).
+    /// The confident stop's risk ([`crate::stop`]): [`Termination::Confident`] stops only once the
+    /// estimated probability that the registration is wrong is below this. Finite, in (0, 1].
     #[serde(default = "default_stop_risk")]
     pub stop_risk: f32,
 }
 
 fn default_stop_risk() -> f32 {
-    crate::pipeline::DEFAULT_STOP_RISK
+    crate::limits::DEFAULT_STOP_RISK
 }
 
 fn is_zero(x: &f32) -> bool {
@@ -71,17 +109,22 @@ fn is_zero(x: &f32) -> bool {
 
 impl Default for EpisodeConfig {
     fn default() -> Self {
-        EpisodeConfig {
-            steps_per_turn: DEFAULT_STEPS_PER_TURN,
-            max_actions: EVAL_MAX_ACTIONS,
-            costs: ActionCosts::default(),
-            min_observability: 0.0,
-            stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
-        }
+        Self::DEFAULT
     }
 }
 
 impl EpisodeConfig {
+    /// The evaluation defaults (Table 4): 2π/54 rotation step, 100 actions, the §4.2
+    /// costs, the observability test off, [`crate::limits::DEFAULT_STOP_RISK`]. A `const`
+    /// so an idle runner can live in a `static`.
+    pub const DEFAULT: EpisodeConfig = EpisodeConfig {
+        steps_per_turn: DEFAULT_STEPS_PER_TURN,
+        max_actions: EVAL_MAX_ACTIONS,
+        costs: ActionCosts::DEFAULT,
+        min_observability: 0.0,
+        stop_risk: crate::limits::DEFAULT_STOP_RISK,
+    };
+
     /// Rotation step in radians.
     pub fn rot_step(&self) -> f32 {
         TAU / self.steps_per_turn.max(1) as f32

@@ -22,9 +22,9 @@
 //! distance, Table 2). A polygon cannot be circularly symmetric, so the `SO(2)` row of
 //! Table 2 never arises.
 
-use crate::floorplan::{FloorPlan, MAX_VERTICES};
-use crate::geometry::{cross, length};
-use crate::math::{abs, atan2, wrap_angle};
+use crate::world::floorplan::{FloorPlan, MAX_VERTICES};
+use crate::world::geometry::{cross, length};
+use crate::world::math::{abs, atan2, wrap_angle};
 use core::f32::consts::PI;
 use heapless::Vec as HVec;
 
@@ -107,8 +107,8 @@ pub fn symmetry_order(plan: &FloorPlan, tol: &SymmetryTolerance) -> u8 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{rotate, v2, Vec2};
-    use crate::math::{cos, sin, TAU};
+    use crate::world::geometry::{rotate, v2, Vec2};
+    use crate::world::math::{cos, sin, TAU};
     use proptest::prelude::*;
 
     fn plan(pts: &[(f32, f32)]) -> FloorPlan {

@@ -7,7 +7,7 @@
 //! outline from the canonical frame into the object frame. Here that is the
 //! **registration** `T: model → scene`, applied to the *centred* outline `S` (model frame
 //! M, origin at the perimeter centroid). In the crate-wide conventions the estimators
-//! return an [`AgentPose`](crate::geometry) `P = (a, h)` = the scene→model transform, so
+//! return an [`AgentPose`](crate::world::geometry) `P = (a, h)` = the scene→model transform, so
 //! `T = P⁻¹ = (R(−h), −R(−h)·a)`: rotation `θ = −h`, translation `t = −R(−h)·a` (the model
 //! centroid seen from the instrument, in scene coordinates). [`PoseDistance::distance`]
 //! takes two `T`s; [`PoseDistance::agent_distance`] takes two AgentPoses and inverts them.
@@ -38,7 +38,7 @@
 //!
 //! ## Symmetry
 //!
-//! For a room with cyclic symmetry `C_n` ([`crate::symmetry`]) the group `G` is the set of
+//! For a room with cyclic symmetry `C_n` ([`crate::world::symmetry`]) the group `G` is the set of
 //! rotations `G_k = R(2πk/n)` about the model origin. `T ∘ G_k` has the same translation
 //! `t` and rotation `θ + 2πk/n`, so the minimum of equation 7 over `G₁, G₂ ∈ G` is
 //!
@@ -56,10 +56,10 @@
 //! position error is rotated into the scene frame, and the distance grows by the rotation
 //! term `2r|sin(δ/2)|`, which is what an error of `δ` displaces the walls by on average.
 
-use crate::floorplan::{FloorPlan, MAX_VERTICES};
-use crate::geometry::{length, Pose2};
-use crate::math::{cos, sin, sqrt, TAU};
-use crate::symmetry::{symmetry_order, SymmetryTolerance};
+use crate::world::floorplan::{FloorPlan, MAX_VERTICES};
+use crate::world::geometry::{length, Pose2};
+use crate::world::math::{cos, sin, sqrt, TAU};
+use crate::world::symmetry::{symmetry_order, SymmetryTolerance};
 use heapless::Vec as HVec;
 
 /// Largest symmetry order (a polygon's order divides its vertex count).
@@ -173,7 +173,7 @@ impl PoseDistance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{rotate, v2, Vec2};
+    use crate::world::geometry::{rotate, v2, Vec2};
     use proptest::prelude::*;
 
     fn plan(pts: &[(f32, f32)]) -> FloorPlan {

@@ -9,13 +9,13 @@
 //! valid outline. Invalid input (a polygon arriving over the serial link, a bad JSON file)
 //! is a [`PlanError`], never a panic.
 
-use crate::geometry::{cross, length, v2, Vec2};
-use crate::math::{abs, acos, atan2, wrap_angle};
+use crate::world::geometry::{cross, length, v2, Vec2};
+use crate::world::math::{abs, acos, atan2, wrap_angle};
 use heapless::Vec as HVec;
 use serde::{Deserialize, Serialize};
 
 /// Fixed vertex capacity of a floor-plan (the generator uses at most 32).
-pub const MAX_VERTICES: usize = 64;
+pub use crate::limits::MAX_VERTICES;
 /// Shortest accepted wall (m).
 pub const MIN_EDGE_LENGTH: f32 = 0.01;
 /// Smallest accepted bounding-box side (m).
@@ -459,7 +459,7 @@ fn on_segment(a: Vec2, b: Vec2, p: Vec2) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::unit;
+    use crate::world::geometry::unit;
     use core::f32::consts::{FRAC_PI_2, PI};
 
     fn rect(w: f32, h: f32) -> FloorPlan {

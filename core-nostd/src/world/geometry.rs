@@ -7,7 +7,7 @@
 //! frame** is the instrument's: origin at the instrument, x axis at encoder bearing 0.
 //! The registration the whole pipeline estimates is the model→scene pose.
 
-use crate::math::{cos, sin, sqrt, wrap_angle};
+use crate::world::math::{cos, sin, sqrt, wrap_angle};
 use serde::{Deserialize, Serialize};
 
 /// A 2-D point or vector in metres.

@@ -1,9 +1,10 @@
-//! Actions, their costs and the seven baseline agents of the paper's Table 3 (§3.1, §4.2).
+//! The discrete action set, its costs and the agent kinds (paper §3.1, §4.2, Table 3):
+//! what an episode is made of. The running baseline agents themselves live in
+//! [`crate::policy::baselines`].
 //!
 //! The agents live in the core (not the simulator) because the firmware runs them on the
 //! instrument until the learnt policy arrives, and host and device must take the same
-//! actions for the same seed. Randomness comes from a seeded [`Pcg32`] and integer
-//! thresholds only, so no floating point is involved in a blind agent's choice.
+//! actions for the same seed.
 //!
 //! **Reading of Table 3.** "Samples a depth measurement every k-th action" is read as:
 //! actions 0, k, 2k, … are measurements, every other action is a left rotation. This is
@@ -12,8 +13,6 @@
 //! the episode ending on a measurement (5 × 2.2 = 11). heuristic-0 alternates starting with a
 //! measurement (9.32 measurements vs 8.54 rotations).
 
-use rand_core::{RngCore, SeedableRng};
-use rand_pcg::Pcg32;
 use serde::{Deserialize, Serialize};
 
 /// One action of the discrete action set (§3.1).
@@ -58,14 +57,17 @@ pub struct ActionCosts {
 
 impl Default for ActionCosts {
     fn default() -> Self {
-        ActionCosts {
-            rotate: 0.005,
-            measure: 0.05,
-        }
+        Self::DEFAULT
     }
 }
 
 impl ActionCosts {
+    /// The §4.2 costs: 0.005 per rotation, 0.05 per measurement.
+    pub const DEFAULT: ActionCosts = ActionCosts {
+        rotate: 0.005,
+        measure: 0.05,
+    };
+
     /// The cost of `a`.
     pub fn of(&self, a: Action) -> f32 {
         match a {
@@ -95,7 +97,7 @@ pub enum AgentKind {
     /// The learnt actor-critic policy (§3.1); not a Table-3 baseline, so not in
     /// [`AgentKind::ALL`]. The host runs it from a policy file.
     Learnt,
-    /// The learnt policy quantised to int8 ([`crate::quantized`]): what the instrument
+    /// The learnt policy quantised to int8 ([`crate::policy::int8`]): what the instrument
     /// runs, and the host too, bit for bit.
     LearntInt8,
     /// Oracle-based information-gain maximisation (§4.3, eqs. 11–13): a greedy benchmark
@@ -140,7 +142,7 @@ impl AgentKind {
         }
     }
 
-    /// True for the seven Table-3 baselines (which [`BaselineAgent`] plays).
+    /// True for the seven Table-3 baselines (which [`BaselineAgent`](crate::policy::BaselineAgent) plays).
     pub fn is_baseline(self) -> bool {
         AgentKind::ALL.contains(&self)
     }
@@ -181,7 +183,7 @@ impl AgentKind {
     }
 
     /// Period k of the "measure every k-th action" heuristics.
-    fn period(self) -> Option<u32> {
+    pub(crate) fn period(self) -> Option<u32> {
         match self {
             AgentKind::Heuristic0 => Some(2),
             AgentKind::Heuristic1 => Some(6),
@@ -192,7 +194,7 @@ impl AgentKind {
     }
 
     /// Probabilities in percent of (left, right, measure) for the blind agents.
-    fn pmf_percent(self) -> Option<(u32, u32, u32)> {
+    pub(crate) fn pmf_percent(self) -> Option<(u32, u32, u32)> {
         match self {
             AgentKind::Blind0 => Some((75, 0, 25)),
             AgentKind::Blind1 => Some((50, 0, 50)),
@@ -202,69 +204,9 @@ impl AgentKind {
     }
 }
 
-/// A running baseline agent: its kind, its own PRNG and the number of actions taken.
-#[derive(Clone, Debug)]
-pub struct BaselineAgent {
-    kind: AgentKind,
-    rng: Pcg32,
-    step: u32,
-}
-
-impl BaselineAgent {
-    /// A fresh agent; `seed` fixes every random choice it will make.
-    pub fn new(kind: AgentKind, seed: u64) -> Self {
-        BaselineAgent {
-            kind,
-            rng: Pcg32::seed_from_u64(seed),
-            step: 0,
-        }
-    }
-
-    /// The agent's kind.
-    pub fn kind(&self) -> AgentKind {
-        self.kind
-    }
-
-    /// Chooses the next action. Baselines ignore observations by definition (Table 3).
-    pub fn next_action(&mut self) -> Action {
-        let step = self.step;
-        self.step += 1;
-        if let Some(k) = self.kind.period() {
-            return if step % k == 0 {
-                Action::Measure
-            } else {
-                Action::RotateLeft
-            };
-        }
-        // Unbiased-enough draw in [0, 100): high 32 bits of a 32x32 product.
-        let r = ((self.rng.next_u32() as u64 * 100) >> 32) as u32;
-        let (left, right, _measure) = self.kind.pmf_percent().unwrap_or((0, 0, 100));
-        if r < left {
-            Action::RotateLeft
-        } else if r < left + right {
-            Action::RotateRight
-        } else {
-            Action::Measure
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn counts(kind: AgentKind, n: usize, seed: u64) -> [usize; 3] {
-        let mut a = BaselineAgent::new(kind, seed);
-        let mut c = [0; 3];
-        for _ in 0..n {
-            match a.next_action() {
-                Action::RotateLeft => c[0] += 1,
-                Action::RotateRight => c[1] += 1,
-                Action::Measure => c[2] += 1,
-            }
-        }
-        c
-    }
 
     #[test]
     fn names_round_trip() {
@@ -286,59 +228,5 @@ mod tests {
             AgentKind::from_id(AgentKind::Learnt.id()),
             Some(AgentKind::Learnt)
         );
-    }
-
-    #[test]
-    fn blind_frequencies_match_table_3() {
-        let n = 200_000;
-        for (kind, expect) in [
-            (AgentKind::Blind0, [0.75, 0.0, 0.25]),
-            (AgentKind::Blind1, [0.5, 0.0, 0.5]),
-            (AgentKind::Blind2, [0.33, 0.33, 0.34]),
-        ] {
-            let c = counts(kind, n, 7);
-            for i in 0..3 {
-                let f = c[i] as f64 / n as f64;
-                // 5 sigma of a binomial proportion at n = 200k is < 0.006.
-                assert!(
-                    (f - expect[i]).abs() < 0.006,
-                    "{kind:?} action {i}: {f} vs {}",
-                    expect[i]
-                );
-            }
-        }
-    }
-
-    #[test]
-    fn heuristics_are_periodic() {
-        for (kind, k) in [
-            (AgentKind::Heuristic0, 2),
-            (AgentKind::Heuristic1, 6),
-            (AgentKind::Heuristic2, 18),
-            (AgentKind::Heuristic3, 54),
-        ] {
-            let mut a = BaselineAgent::new(kind, 1);
-            for step in 0..540u32 {
-                let act = a.next_action();
-                assert_eq!(
-                    act == Action::Measure,
-                    step % k == 0,
-                    "{kind:?} step {step}"
-                );
-                assert_ne!(act, Action::RotateRight);
-            }
-        }
-    }
-
-    #[test]
-    fn seeded_and_reproducible() {
-        let run = |seed| {
-            let mut a = BaselineAgent::new(AgentKind::Blind2, seed);
-            (0..64)
-                .map(|_| a.next_action())
-                .collect::<heapless::Vec<_, 64>>()
-        };
-        assert_eq!(run(3), run(3));
-        assert_ne!(run(3), run(4));
     }
 }

@@ -2,7 +2,7 @@
 //! simulator and the firmware alike: localizer set-up, voting each returned range,
 //! the termination rule, and the final refinement of the coarse estimate.
 //!
-//! Both [`crate::session::Controller`] (on the instrument) and the host's episode runner
+//! Both [`crate::device::Controller`] (on the instrument) and the host's episode runner
 //! drive a [`Pipeline`]; that is what makes "the same episode on the host and on the
 //! firmware takes the same actions and reports the same poses" true by construction.
 //!
@@ -12,9 +12,9 @@
 //!   ([`Pipeline::min_measurements`]); then [`Termination::Oracle`] stops on coarse success
 //!   against a supplied ground truth (the paper's rule, simulation only); [`Termination::Confident`]
 //!   stops when the calibrated estimate of the probability that the registration is wrong
-//!   is below [`PipelineParams::stop_risk`] ([`crate::stop`]; no ground truth);
+//!   is below [`EpisodeConfig::stop_risk`] ([`crate::stop`]; no ground truth);
 //!   [`Termination::ActionLimit`] never stops early.
-//! - **Refinement** (§3.3): the multi-hypothesis refinement ([`crate::refine`]): annealed
+//! - **Refinement** (§3.3): the multi-hypothesis refinement ([`crate::registration::refine`]): annealed
 //!   sparse ICP ([`registration::register_multistart`]) from the belief argmax, kept inside
 //!   the region the coarse estimate vouches for ([`TRUST_CELLS`], 1.5 rotation bins), with a
 //!   deterministic heading sweep when the heading is unknown ([`REGISTRATION_STARTS`]), over
@@ -23,41 +23,26 @@
 //! Memory: the localizer dominates (≈ 46 KiB for 30×30×10); [`Pipeline::new_empty`] is a
 //! `const fn` so the firmware keeps it in a `static`.
 
-use crate::floorplan::FloorPlan;
-use crate::geometry::Pose2;
+use crate::episode::{AgentKind, EpisodeConfig, EpisodeParams};
 use crate::localization::{CellIndex, GhtLocalizer, LocError, LocalizerConfig};
-use crate::refine::{self, RefineInput, Refinement};
+use crate::registration::refine::{self, RefineInput, Refinement};
 use crate::registration::{
     self, AnnealParams, Measurement, Observability, Observations, RangeModel, Registration,
     RegistrationError,
 };
 use crate::stop::{self, StopFeatures, StopModel};
-use crate::symmetry::{symmetry_order, SymmetryTolerance};
+use crate::world::floorplan::FloorPlan;
+use crate::world::geometry::Pose2;
+use crate::world::symmetry::{symmetry_order, SymmetryTolerance};
 use serde::{Deserialize, Serialize};
 
-/// When an episode stops (besides the action limit).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-pub enum Termination {
-    /// On coarse success against the ground truth (the paper's rule; simulation only).
-    Oracle,
-    /// When the calibrated estimate of P(wrong registration) is below
-    /// [`PipelineParams::stop_risk`] ([`crate::stop`]); no ground truth used. The answer is
-    /// the refined pose, scored by the cell it lies in ([`Pipeline::answer_cell`]).
-    Confident,
-    /// Never: run to the action limit.
-    ActionLimit,
-}
+pub mod runner;
 
-impl Termination {
-    /// Lowercase name used on the command line and in JSON.
-    pub fn name(self) -> &'static str {
-        match self {
-            Termination::Oracle => "oracle",
-            Termination::Confident => "confident",
-            Termination::ActionLimit => "action-limit",
-        }
-    }
-}
+// TEMPORARY: old paths for host-sim until the merge. `Termination` moved to `episode` (this
+// module uses it through this line: import it from `crate::episode` when the line goes),
+// `DEFAULT_STOP_RISK` to `limits`, `registration_seed` to `episode`.
+pub use crate::episode::{registration_seed, Termination};
+pub use crate::limits::DEFAULT_STOP_RISK;
 
 /// Radius of the registration's trust region around the coarse estimate, in grid cells.
 /// Coarse success puts the truth within 1.5 cells per axis of the argmax cell centre, but
@@ -74,35 +59,6 @@ pub const MIN_MEASUREMENTS_UNKNOWN_HEADING: usize = 3;
 
 /// Heading starts of the registration sweep when the heading is unknown.
 pub const REGISTRATION_STARTS: u8 = 9;
-
-/// What one episode needs besides the plan.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct PipelineParams {
-    /// Rotation bins K (1 = heading known).
-    pub rot_bins: u8,
-    /// The heading when K = 1.
-    pub known_heading: Option<f32>,
-    /// The true AgentPose, when known (simulation): oracle termination and the
-    /// `recognised` statistic need it.
-    pub ground_truth: Option<Pose2>,
-    /// Termination rule.
-    pub termination: Termination,
-    /// Seed of the registration's perturbations.
-    pub registration_seed: u64,
-    /// Stop only when the readings determine the pose: the smallest eigenvalue of their
-    /// normalised information matrix at the belief argmax
-    /// ([`registration::observability`]) is at least this. 0 turns the test off (the
-    /// default; the protocol carries it since v4, so the instrument runs the host's τ).
-    pub min_observability: f32,
-    /// [`Termination::Confident`] stops only once the estimated probability that the
-    /// belief argmax is wrong is below this ([`DEFAULT_STOP_RISK`] by default; the
-    /// protocol carries it). Valid: finite, in (0, 1].
-    pub stop_risk: f32,
-}
-
-/// The default of [`PipelineParams::stop_risk`]: stop when the estimated probability of a
-/// wrong registration is below 1 %.
-pub const DEFAULT_STOP_RISK: f32 = 0.01;
 
 /// Why [`Pipeline::start`] refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -140,7 +96,7 @@ pub struct PipelineResult {
     pub symmetry_order: u8,
     /// How well the readings determine the pose at the coarse estimate.
     pub observability: Option<Observability>,
-    /// The winning hypothesis of the multi-hypothesis refinement ([`crate::refine`]);
+    /// The winning hypothesis of the multi-hypothesis refinement ([`crate::registration::refine`]);
     /// its registration is `refined`.
     pub refinement: Option<Refinement>,
     /// The calibrated stop's estimate of P(wrong) at the end ([`Pipeline::stop_risk_estimate`]);
@@ -165,7 +121,7 @@ pub struct Pipeline {
     /// The episode's plan (the observability test ray-casts into it).
     plan: FloorPlan,
     observations: Observations,
-    params: PipelineParams,
+    params: EpisodeParams,
     order: u8,
     voted: bool,
     ready: bool,
@@ -202,14 +158,15 @@ impl Pipeline {
             localizer: GhtLocalizer::new_empty(),
             plan: FloorPlan::empty(),
             observations: Observations::new(),
-            params: PipelineParams {
+            params: EpisodeParams {
+                agent: AgentKind::Blind0,
+                seed: 0,
                 rot_bins: 1,
                 known_heading: None,
                 ground_truth: None,
+                initial_scan: 0,
                 termination: Termination::ActionLimit,
-                registration_seed: 0,
-                min_observability: 0.0,
-                stop_risk: DEFAULT_STOP_RISK,
+                config: EpisodeConfig::DEFAULT,
             },
             order: 1,
             voted: false,
@@ -221,7 +178,7 @@ impl Pipeline {
 
     /// The localizer configuration for `rot_bins` (1 = heading known and given).
     pub fn localizer_config(rot_bins: u8, known_heading: f32) -> LocalizerConfig {
-        if rot_bins <= 1 {
+        if rot_bins == 1 {
             LocalizerConfig::known_heading(known_heading)
         } else {
             LocalizerConfig {
@@ -232,13 +189,9 @@ impl Pipeline {
     }
 
     /// Prepares an episode on the centred `plan`.
-    pub fn start(
-        &mut self,
-        plan: &FloorPlan,
-        params: &PipelineParams,
-    ) -> Result<(), PipelineError> {
+    pub fn start(&mut self, plan: &FloorPlan, params: &EpisodeParams) -> Result<(), PipelineError> {
         self.ready = false;
-        let heading = match (params.rot_bins <= 1, params.known_heading) {
+        let heading = match (params.heading_known(), params.known_heading) {
             (true, None) => return Err(PipelineError::KnownHeadingRequired),
             (true, Some(h)) => h,
             (false, _) => 0.0,
@@ -291,7 +244,7 @@ impl Pipeline {
                     self.remember_if_best(risk);
                     Some(risk)
                 });
-                risk.filter(|&r| r < self.params.stop_risk)
+                risk.filter(|&r| r < self.params.config.stop_risk)
                     .map(|_| Stop::Confident)?
             }
             Termination::Oracle => self
@@ -301,10 +254,10 @@ impl Pipeline {
                 .map(|_| Stop::CoarseSuccess)?,
             Termination::ActionLimit => return None,
         };
-        if self.params.min_observability > 0.0
+        if self.params.config.min_observability > 0.0
             && self
                 .observability()
-                .is_none_or(|o| o.min_eigenvalue < self.params.min_observability)
+                .is_none_or(|o| o.min_eigenvalue < self.params.config.min_observability)
         {
             return None;
         }
@@ -370,10 +323,11 @@ impl Pipeline {
         let offset_cells = ((pose.x - coarse.x) / grid.cell[0])
             .abs()
             .max(((pose.y - coarse.y) / grid.cell[1]).abs());
-        let offset_bins = if self.params.rot_bins <= 1 {
+        let offset_bins = if self.params.heading_known() {
             0.0
         } else {
-            crate::math::abs(crate::math::wrap_angle(pose.theta - coarse.theta)) / grid.bin_width()
+            crate::world::math::abs(crate::world::math::wrap_angle(pose.theta - coarse.theta))
+                / grid.bin_width()
         };
         Some(StopFeatures {
             peak_mass,
@@ -388,7 +342,8 @@ impl Pipeline {
             edge_margin: {
                 let lo = grid.cell_centre(answer.ix as usize, answer.iy as usize);
                 let (hx, hy) = (0.5 * grid.cell[0], 0.5 * grid.cell[1]);
-                (hx - crate::math::abs(pose.x - lo.x)).min(hy - crate::math::abs(pose.y - lo.y))
+                (hx - crate::world::math::abs(pose.x - lo.x))
+                    .min(hy - crate::world::math::abs(pose.y - lo.y))
             },
             agrees: grid.cell_of_pose(&pose).is_some_and(|c| {
                 c.ix == argmax.ix && c.iy == argmax.iy && grid.bin_distance(c.bin, argmax.bin) <= 1
@@ -422,7 +377,7 @@ impl Pipeline {
     /// heuristic-1 from 2.88 to 3.04 measurements (K = 1) and cut its mean recognised pose
     /// error from 0.157 m to 0.121 m (K = 1) and from 0.433 m to 0.310 m (K = 10).
     pub fn min_measurements(&self) -> usize {
-        if self.params.rot_bins <= 1 {
+        if self.params.heading_known() {
             MIN_MEASUREMENTS_KNOWN_HEADING
         } else {
             MIN_MEASUREMENTS_UNKNOWN_HEADING
@@ -433,13 +388,13 @@ impl Pipeline {
     /// [`TRUST_CELLS`] cells and 1.5 rotation bins around the coarse estimate.
     pub fn registration_params(&self) -> AnnealParams {
         let mut p = AnnealParams {
-            seed: self.params.registration_seed,
+            seed: self.params.registration_seed(),
             ..AnnealParams::default()
         };
         let grid = self.localizer.grid();
-        p.icp.fixed_heading = self.params.rot_bins <= 1;
+        p.icp.fixed_heading = self.params.heading_known();
         p.icp.trust_translation = TRUST_CELLS * grid.cell[0].max(grid.cell[1]);
-        p.icp.trust_rotation = if self.params.rot_bins <= 1 {
+        p.icp.trust_rotation = if self.params.heading_known() {
             f32::INFINITY
         } else {
             self.heading_span()
@@ -449,7 +404,7 @@ impl Pipeline {
 
     /// Half-width of the registration's heading sweep (0 with a known heading).
     pub fn heading_span(&self) -> f32 {
-        if self.params.rot_bins <= 1 {
+        if self.params.heading_known() {
             0.0
         } else {
             1.5 * self.localizer.grid().bin_width()
@@ -468,7 +423,7 @@ impl Pipeline {
             &self.plan,
             &self.observations,
             &coarse,
-            self.params.rot_bins <= 1,
+            self.params.heading_known(),
         ))
     }
 
@@ -555,7 +510,7 @@ impl Pipeline {
         }
     }
 
-    /// The multi-hypothesis refinement ([`crate::refine`]) of the readings so far.
+    /// The multi-hypothesis refinement ([`crate::registration::refine`]) of the readings so far.
     /// Deterministic: the confident rule's kept result is returned when the readings have
     /// not changed since.
     pub fn refine(&self, plan: &FloorPlan) -> Result<Refinement, RegistrationError> {
@@ -612,20 +567,10 @@ impl Pipeline {
     }
 }
 
-/// The registration seed both sides derive from the episode's agent seed (SplitMix64 of a
-/// tagged seed, so it is decorrelated from the agent's own stream).
-pub fn registration_seed(agent_seed: u64) -> u64 {
-    let mut z = agent_seed ^ 0x7265_6769_7374_6572; // "register"
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::geometry::{unit, v2};
+    use crate::world::geometry::{unit, v2};
 
     /// An 8 × 6 m L-shaped room in the model frame (shared by the core's tests).
     pub(crate) fn l_room() -> FloorPlan {
@@ -644,20 +589,25 @@ pub(crate) mod tests {
     #[test]
     fn refuses_incomplete_params() {
         let mut p = Pipeline::new_empty();
-        let base = PipelineParams {
+        let base = EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 1,
             rot_bins: 1,
             known_heading: None,
             ground_truth: None,
+            initial_scan: 0,
             termination: Termination::ActionLimit,
-            registration_seed: 1,
-            min_observability: 0.0,
-            stop_risk: DEFAULT_STOP_RISK,
+            config: EpisodeConfig {
+                min_observability: 0.0,
+                stop_risk: DEFAULT_STOP_RISK,
+                ..EpisodeConfig::DEFAULT
+            },
         };
         assert_eq!(
             p.start(&l_room(), &base),
             Err(PipelineError::KnownHeadingRequired)
         );
-        let oracle = PipelineParams {
+        let oracle = EpisodeParams {
             rot_bins: 10,
             termination: Termination::Oracle,
             ..base
@@ -676,14 +626,19 @@ pub(crate) mod tests {
         let mut p = Pipeline::new_empty();
         p.start(
             &plan,
-            &PipelineParams {
+            &EpisodeParams {
+                agent: AgentKind::Heuristic1,
+                seed: 3,
                 rot_bins: 10,
                 known_heading: None,
                 ground_truth: Some(truth),
+                initial_scan: 0,
                 termination: Termination::Oracle,
-                registration_seed: 3,
-                min_observability: 0.0,
-                stop_risk: DEFAULT_STOP_RISK,
+                config: EpisodeConfig {
+                    min_observability: 0.0,
+                    stop_risk: DEFAULT_STOP_RISK,
+                    ..EpisodeConfig::DEFAULT
+                },
             },
         )
         .unwrap();
@@ -712,22 +667,27 @@ pub(crate) mod tests {
         assert!(o.min_eigenvalue > 0.0 && o.constraints as usize == p.observations().len());
         // The observability threshold holds the stop back: the same readings stop the
         // episode under a threshold they meet and not under one above what they reach.
-        p.params.min_observability = 0.5 * o.min_eigenvalue;
+        p.params.config.min_observability = 0.5 * o.min_eigenvalue;
         assert_eq!(p.should_stop(), Some(Stop::CoarseSuccess));
-        p.params.min_observability = 2.0 * o.min_eigenvalue;
+        p.params.config.min_observability = 2.0 * o.min_eigenvalue;
         assert_eq!(p.should_stop(), None);
     }
 
     /// Confident termination at K = 10 with the truth known (for scoring) and stop risk `p`.
-    fn confident_params(truth: Pose2, p: f32) -> PipelineParams {
-        PipelineParams {
+    fn confident_params(truth: Pose2, p: f32) -> EpisodeParams {
+        EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 5,
             rot_bins: 10,
             known_heading: None,
             ground_truth: Some(truth),
+            initial_scan: 0,
             termination: Termination::Confident,
-            registration_seed: 5,
-            min_observability: 0.0,
-            stop_risk: p,
+            config: EpisodeConfig {
+                min_observability: 0.0,
+                stop_risk: p,
+                ..EpisodeConfig::DEFAULT
+            },
         }
     }
 
@@ -832,9 +792,9 @@ pub(crate) mod tests {
             "{best:?}"
         );
         // The same readings do not stop under a risk below the estimate.
-        p.params.stop_risk = 0.5 * risk;
+        p.params.config.stop_risk = 0.5 * risk;
         assert_eq!(p.should_stop(), None);
-        p.params.stop_risk = risk * 1.01;
+        p.params.config.stop_risk = risk * 1.01;
         assert_eq!(p.should_stop(), Some(Stop::Confident));
 
         // The kept refinement follows the readings: after one more range the pipeline's

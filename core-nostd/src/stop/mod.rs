@@ -1,6 +1,6 @@
 //! The calibrated stop (issue 12): an instrument has no ground truth, so it stops when the
 //! *estimated probability that its registration is wrong* falls below the user's risk
-//! `P` ([`crate::pipeline::PipelineParams::stop_risk`], default 1 %).
+//! `P` ([`crate::episode::EpisodeConfig::stop_risk`], default 1 %).
 //!
 //! **What "wrong" means.** Under this stop the instrument answers with its refined pose,
 //! so the answer is right when the cell that pose lies in is a coarse success (the
@@ -15,11 +15,13 @@
 //! explain. So the estimate is a logistic model `P(wrong) = σ(w·x + b)` over
 //! [`StopFeatures`] (belief and readings together), one per rotation setting, fitted on
 //! training plans (seeds below the test set) by `activesense calibrate`, which writes
-//! [`crate::stop_calibration`]. The features are computed only once the belief's peak mass
+//! [`crate::stop::calibration`]. The features are computed only once the belief's peak mass
 //! reaches [`GATE_PEAK_MASS`] (below it the instrument keeps measuring without running the
 //! refinement); the calibration data is gathered under the same gate.
 
-use crate::math::{exp, ln};
+pub mod calibration;
+
+use crate::world::math::{exp, ln};
 use serde::{Deserialize, Serialize};
 
 /// Peak mass from which the stop features are computed (and the stop considered).
@@ -126,10 +128,10 @@ impl StopModel {
         }
     }
 
-    /// The built-in model for `rot_bins` ([`crate::stop_calibration::MODELS`]): the one fitted
+    /// The built-in model for `rot_bins` ([`crate::stop::calibration::MODELS`]): the one fitted
     /// for that K, else the one fitted for the nearest K.
     pub fn for_rot_bins(rot_bins: u8) -> &'static StopModel {
-        let models = crate::stop_calibration::MODELS;
+        let models = crate::stop::calibration::MODELS;
         let mut best = &models[0];
         for m in models.iter() {
             if m.rot_bins.abs_diff(rot_bins) < best.rot_bins.abs_diff(rot_bins) {

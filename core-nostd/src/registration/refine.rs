@@ -33,15 +33,15 @@
 //! episodes): a 3-heading sweep instead of 9 gave 0.075 m, starting the leave-out fits from
 //! the all-readings fit without a sweep 0.091 m, against 0.070 m as built.
 
-use crate::floorplan::FloorPlan;
-use crate::geometry::Pose2;
 use crate::localization::grid::CellIndex;
 use crate::localization::GhtLocalizer;
-use crate::math::ln;
 use crate::registration::{
     self, AnnealParams, IcpParams, Observations, RangeFit, RangeModel, Registration,
     RegistrationError, MAX_EXCLUDED, NOT_EXCLUDED,
 };
+use crate::world::floorplan::FloorPlan;
+use crate::world::geometry::Pose2;
+use crate::world::math::ln;
 use serde::{Deserialize, Serialize};
 
 /// Leave-out hypotheses only up to this many readings; beyond it the ICP's percentile
@@ -246,10 +246,10 @@ pub fn refine(input: &RefineInput<'_>) -> Result<Refinement, RegistrationError> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::unit;
     use crate::localization::LocalizerConfig;
     use crate::pipeline::tests::l_room;
     use crate::registration::Measurement;
+    use crate::world::geometry::unit;
 
     /// Three readings with the heading known, the last one an outlier: the plain
     /// registration is dragged off by it, the refinement leaves it out.

@@ -5,8 +5,8 @@
 //! A `static` that nobody references costs no flash.
 
 /// `policies/k1/policy.q8`.
-pub static K1: &[u8] = include_bytes!("../../policies/k1/policy.q8");
+pub static K1: &[u8] = include_bytes!("../../../policies/k1/policy.q8");
 /// `policies/k10/policy.q8`.
-pub static K10: &[u8] = include_bytes!("../../policies/k10/policy.q8");
-/// Both, for [`crate::session::SessionConfig::policies`].
+pub static K10: &[u8] = include_bytes!("../../../policies/k10/policy.q8");
+/// Both, for [`crate::device::SessionConfig::policies`].
 pub static POLICIES: [&[u8]; 2] = [K1, K10];

@@ -1,0 +1,197 @@
+//! How well readings fit and determine a pose, without moving it: the observability test
+//! (the smallest eigenvalue of the readings' normalised information matrix, issue 12) and
+//! the range fit under the EDM's range model (what the refinement scores hypotheses with).
+
+use super::*;
+
+/// How well a set of readings determines the pose (issue 12's observability test): the
+/// smallest eigenvalue of the normalised information matrix of the point-to-wall
+/// constraints the readings would give at a pose.
+///
+/// At `pose`, reading `i` (bearing `βᵢ`) casts a ray into the model; the wall it hits, with
+/// outward normal `nᵢ`, constrains the pose along `nᵢ` only. A small pose change
+/// `(δx, δy, δθ)` moves that reading's residual by `nᵢ·(δx, δy) + nᵢ·⊥(R(h)sᵢ)·δθ`. With
+/// the rotation expressed as the displacement it causes at the readings' RMS range `L`
+/// (`δφ = L·δθ`), the rows `Jᵢ = (nᵢ, nᵢ·⊥(R(h)sᵢ)/L)` are unitless and
+/// `A = (1/N) Σ JᵢᵀJᵢ` has eigenvalues in `[0, 1]`. Its smallest eigenvalue is the
+/// fraction of the readings' information along the worst-determined direction:
+/// 0 for a fan onto one wall (nothing fixes the position along the wall), ½ for readings
+/// split evenly between two perpendicular walls with the heading known. The heading is a
+/// column of its own only when it is unknown (`fixed_heading == false`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Observability {
+    /// Smallest eigenvalue of the normalised information matrix (0 = undetermined).
+    pub min_eigenvalue: f32,
+    /// Readings whose ray hits a wall at the pose (the others add nothing).
+    pub constraints: u16,
+}
+
+/// [`Observability`] of `obs` at `pose` (ranges are not used: only which wall each
+/// bearing's ray meets, and how).
+pub fn observability(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    fixed_heading: bool,
+) -> Observability {
+    let a = pose.translation();
+    let mut rows: HVec<[f32; 3], MAX_OBSERVATIONS> = HVec::new();
+    let mut sum_r2 = 0.0f32;
+    for p in obs.pts.iter() {
+        let d = rotate(p.d, pose.theta);
+        if let Some(hit) = plan.ray_cast(a, d) {
+            let n = plan.outward_normal(hit.wall);
+            let rs = d * hit.range; // R(h)·s for the predicted point
+            let rot = n.x * -rs.y + n.y * rs.x;
+            sum_r2 += hit.range * hit.range;
+            let _ = rows.push([n.x, n.y, rot]);
+        }
+    }
+    let m = rows.len();
+    if m == 0 {
+        return Observability {
+            min_eigenvalue: 0.0,
+            constraints: 0,
+        };
+    }
+    let l = sqrt(sum_r2 / m as f32).max(1e-6);
+    let mut info = [[0.0f32; 3]; 3];
+    for r in rows.iter() {
+        let j = [r[0], r[1], r[2] / l];
+        for (u, ju) in j.iter().enumerate() {
+            for (v, jv) in j.iter().enumerate() {
+                info[u][v] += ju * jv / m as f32;
+            }
+        }
+    }
+    let min_eigenvalue = if fixed_heading {
+        min_eigen_2x2(info[0][0], info[0][1], info[1][1])
+    } else {
+        min_eigen_3x3(&info)
+    };
+    Observability {
+        min_eigenvalue: min_eigenvalue.max(0.0),
+        constraints: m as u16,
+    }
+}
+
+/// The EDM's range model, used to score a pose against the readings: a reading either is
+/// explained (its range residual along the ray is Gaussian) or is an outlier (its range is
+/// uniform over `(0, max_range]`). This is the sensor model of the simulation (`host-sim`
+/// `SensorModel`: σ = 1 cm, 5 % outliers, 50 m), with σ widened to cover the fit's own
+/// imprecision: the registration minimises point-to-wall distances, not range residuals.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RangeModel {
+    /// Standard deviation of an explained reading's range residual (m).
+    pub sigma: f32,
+    /// Probability that a reading is an outlier.
+    pub outlier_prob: f32,
+    /// Extent of the outliers' uniform density (m).
+    pub max_range: f32,
+}
+
+impl Default for RangeModel {
+    fn default() -> Self {
+        RangeModel {
+            sigma: 0.03,
+            outlier_prob: 0.05,
+            max_range: 50.0,
+        }
+    }
+}
+
+/// How well a pose explains the readings under a [`RangeModel`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RangeFit {
+    /// `Σᵢ ln((1−ε)·N(rᵢ; 0, σ²) + ε/R)` over all readings, `rᵢ` the measured minus the
+    /// ray-cast range at the pose (a ray that meets no wall explains nothing).
+    pub log_likelihood: f32,
+    /// Readings within 3σ of the ray-cast range.
+    pub explained: u16,
+    /// Distinct bearings among the readings (a bearing measured twice is one direction).
+    pub bearings: u16,
+    /// Distinct bearings with at least one explained reading: the independent checks the
+    /// pose passed (repeating a range at one bearing re-checks the same wall point).
+    pub explained_bearings: u16,
+}
+
+/// [`RangeFit`] of every reading of `obs` at AgentPose `pose` (excluded or not: the
+/// refinement compares hypotheses on the same readings).
+pub fn range_fit(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    model: &RangeModel,
+) -> RangeFit {
+    let a = pose.translation();
+    let sigma = model.sigma.max(1e-6);
+    let outlier = model.outlier_prob.clamp(0.0, 1.0) / model.max_range.max(1e-6);
+    let peak = (1.0 - model.outlier_prob.clamp(0.0, 1.0)) / (sigma * sqrt(TAU));
+    let (mut log_likelihood, mut explained) = (0.0f32, 0u16);
+    let (mut bearings, mut explained_bearings) = (0u16, 0u16);
+    // Whether reading i was explained (for the per-bearing counts).
+    let mut ok = [false; MAX_OBSERVATIONS];
+    for (i, p) in obs.pts.iter().enumerate() {
+        let measured = length(p.s);
+        let predicted = plan.ray_cast(a, rotate(p.d, pose.theta)).map(|h| h.range);
+        let density = match predicted {
+            Some(r) => {
+                let z = (measured - r) / sigma;
+                if abs(z) <= 3.0 {
+                    explained += 1;
+                    ok[i] = true;
+                }
+                // exp underflows to 0 far out, leaving the outlier density: no NaN.
+                peak * exp(-0.5 * z * z) + outlier
+            }
+            None => outlier,
+        };
+        log_likelihood += ln(density.max(f32::MIN_POSITIVE));
+    }
+    // Encoder bearings repeat exactly, so equal directions are the same bearing.
+    for (i, p) in obs.pts.iter().enumerate() {
+        let same = |j: usize| obs.pts[j].d == p.d;
+        if !(0..i).any(same) {
+            bearings += 1;
+        }
+        if ok[i] && !(0..i).any(|j| ok[j] && same(j)) {
+            explained_bearings += 1;
+        }
+    }
+    RangeFit {
+        log_likelihood,
+        explained,
+        bearings,
+        explained_bearings,
+    }
+}
+
+/// Smallest eigenvalue of the symmetric `[[a, b], [b, c]]`.
+pub(super) fn min_eigen_2x2(a: f32, b: f32, c: f32) -> f32 {
+    let mean = 0.5 * (a + c);
+    let half = sqrt(0.25 * (a - c) * (a - c) + b * b);
+    mean - half
+}
+
+/// Smallest eigenvalue of a symmetric 3×3 matrix (trigonometric solution of the
+/// characteristic cubic, Smith 1961).
+pub(super) fn min_eigen_3x3(m: &[[f32; 3]; 3]) -> f32 {
+    let p1 = m[0][1] * m[0][1] + m[0][2] * m[0][2] + m[1][2] * m[1][2];
+    let q = (m[0][0] + m[1][1] + m[2][2]) / 3.0;
+    if p1 <= 1e-12 {
+        return m[0][0].min(m[1][1]).min(m[2][2]);
+    }
+    let p2 = (m[0][0] - q) * (m[0][0] - q)
+        + (m[1][1] - q) * (m[1][1] - q)
+        + (m[2][2] - q) * (m[2][2] - q)
+        + 2.0 * p1;
+    let p = sqrt(p2 / 6.0);
+    let b = |i: usize, j: usize| (m[i][j] - if i == j { q } else { 0.0 }) / p;
+    let det = b(0, 0) * (b(1, 1) * b(2, 2) - b(1, 2) * b(2, 1))
+        - b(0, 1) * (b(1, 0) * b(2, 2) - b(1, 2) * b(2, 0))
+        + b(0, 2) * (b(1, 0) * b(2, 1) - b(1, 1) * b(2, 0));
+    let r = (det / 2.0).clamp(-1.0, 1.0);
+    let phi = crate::world::math::acos(r) / 3.0;
+    // Eigenvalues q + 2p·cos(φ + 2πk/3); k = 1 gives the smallest.
+    q + 2.0 * p * cos(phi + TAU / 3.0)
+}
