@@ -15,6 +15,7 @@ pub mod bench_localization;
 pub mod bench_registration;
 pub mod calibrate;
 pub mod classical;
+pub mod cli;
 pub mod device;
 pub mod episode;
 pub mod eval;
