@@ -1,32 +1,30 @@
 //! # activesense-sim
 //!
-//! The std side of activesense: the seeded floor-plan generator ([`plans`]), the simulated
-//! instrument and its sensors ([`world`], [`sensor`]), the episode runner with its
-//! trajectory log ([`episode`]), the evaluation harness ([`eval`], [`plot`]) and SVG
-//! rendering ([`svg`]); the classical grid Markov localizer ([`classical`]) and the
-//! localization / registration benchmarks ([`bench_localization`], [`bench_registration`]);
-//! the learned actor-critic policy network and its policy file format ([`learn`]); the
-//! inspection tool: trajectory pages and the guided-back-propagation analysis ([`inspect`]).
-//! [`link`], [`device`] and [`remote`] talk the instrument serial protocol
-//! (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a
-//! thread. [`planfile`] reads the user's own floor plans (JSON, GeoJSON, DXF). [`calibrate`] fits the calibrated stop. The `activesense` binary (`src/main.rs`) is the command-line front end.
+//! The std side of activesense. Modules, lowest first (a module imports only from those
+//! above it in this list, plus `activesense_core`):
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`world`] | the seeded floor-plan generator ([`world::plans`]), the user's own plans ([`world::planfile`]: JSON, GeoJSON, DXF), the simulated sensors ([`world::sensor`]) and the simulated instrument's world ([`world::SimWorld`]) |
+//! | [`episode`] | the in-process episode: [`episode::EpisodeSpec`], the runner and its [`episode::Trajectory`] log |
+//! | [`baselines`] | the greedy benchmarks ([`baselines::greedy`]: OIGM, EEM) and the classical grid Markov localizer ([`baselines::classical`]) |
+//! | [`plot`] | every picture: the plan/trajectory scene ([`plot::svg`]), the evaluation charts and the trainer's learning curve, all from plain data |
+//! | [`learn`] | the learned actor-critic policy: network, policy file, int8 quantisation, training |
+//! | [`eval`] | the evaluation harness (the paper's Table 4): episodes, statistics, the markdown report, the extra-measurements experiment |
+//! | [`bench`] | the localization and registration benchmarks |
+//! | [`calibrate`] | the fit of the calibrated stop |
+//! | [`inspect`] | the inspection tool: trajectory pages and the guided-back-propagation analysis |
+//! | [`link`] | the instrument serial protocol (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a thread, and the commands that drive it |
+//! | [`cli`] | the bodies of the `activesense` commands; the binary (`src/main.rs`) is the clap tree only |
 
-pub mod bench_localization;
-pub mod bench_registration;
+pub mod baselines;
+pub mod bench;
 pub mod calibrate;
-pub mod classical;
 pub mod cli;
-pub mod device;
 pub mod episode;
 pub mod eval;
-pub mod greedy;
 pub mod inspect;
 pub mod learn;
 pub mod link;
-pub mod planfile;
-pub mod plans;
 pub mod plot;
-pub mod remote;
-pub mod sensor;
-pub mod svg;
 pub mod world;

@@ -30,12 +30,12 @@ enum Command {
     /// generated training plans; writes the policy file, its learning curve and logs.
     Train(cli::train::TrainArgs),
     /// Run episodes on the instrument controller (QEMU, serial, TCP or loopback) while the host plays its sensors.
-    Sim(activesense_sim::remote::SimArgs),
+    Sim(activesense_sim::link::remote::SimArgs),
     /// Talk to an instrument controller on a serial port.
-    Serial(activesense_sim::remote::SerialArgs),
+    Serial(activesense_sim::link::remote::SerialArgs),
     /// Count the firmware's instructions per update and per registration under QEMU
     /// (-icount shift=0); prints a markdown table (see `cargo xtask mcu-bench`).
-    McuBench(activesense_sim::remote::McuBenchArgs),
+    McuBench(activesense_sim::link::remote::McuBenchArgs),
     /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
     Dataset(cli::dataset::DatasetArgs),
     /// Evaluate agents on the test plans (the paper's Table 4): writes results.json,
@@ -72,9 +72,9 @@ enum PolicyCommand {
     Agreement(cli::policy::AgreementArgs),
     /// Upload an int8 policy into the instrument's RAM slot, replacing the one serving its
     /// K without reflashing (a corrupt or mismatched blob is refused; the old one serves on).
-    Upload(activesense_sim::remote::PolicyUploadArgs),
+    Upload(activesense_sim::link::remote::PolicyUploadArgs),
     /// Show which policy serves K = 1 and K = 10 on the instrument (built-in or uploaded).
-    Info(activesense_sim::remote::PolicyInfoArgs),
+    Info(activesense_sim::link::remote::PolicyInfoArgs),
 }
 
 fn main() -> ExitCode {
@@ -88,13 +88,17 @@ fn main() -> ExitCode {
         Command::Calibrate(a) => activesense_sim::calibrate::cmd_calibrate(a),
         Command::BenchRegistration(a) => cli::bench_registration::run(a),
         Command::BenchLocalization(a) => cli::bench_localization::run(a),
-        Command::Sim(a) => activesense_sim::remote::cmd_sim(a),
-        Command::Serial(a) => activesense_sim::remote::cmd_serial(a),
-        Command::McuBench(a) => activesense_sim::remote::cmd_mcu_bench(a),
+        Command::Sim(a) => activesense_sim::link::remote::cmd_sim(a),
+        Command::Serial(a) => activesense_sim::link::remote::cmd_serial(a),
+        Command::McuBench(a) => activesense_sim::link::remote::cmd_mcu_bench(a),
         Command::Policy(PolicyCommand::Quantize(a)) => cli::policy::quantize(a),
         Command::Policy(PolicyCommand::Agreement(a)) => cli::policy::agreement(a),
-        Command::Policy(PolicyCommand::Upload(a)) => activesense_sim::remote::cmd_policy_upload(a),
-        Command::Policy(PolicyCommand::Info(a)) => activesense_sim::remote::cmd_policy_info(a),
+        Command::Policy(PolicyCommand::Upload(a)) => {
+            activesense_sim::link::remote::cmd_policy_upload(a)
+        }
+        Command::Policy(PolicyCommand::Info(a)) => {
+            activesense_sim::link::remote::cmd_policy_info(a)
+        }
         Command::Inspect(a) => activesense_sim::inspect::cmd_inspect(a, &command_line()),
     };
     match result {

@@ -28,7 +28,7 @@ pub struct BenchRegistrationArgs {
 }
 
 pub fn run(a: BenchRegistrationArgs) -> Result<()> {
-    use crate::bench_registration as bench;
+    use crate::bench::registration as bench;
     let opts = bench::BenchOptions {
         plans: a.plans,
         measurements: a.measurements,

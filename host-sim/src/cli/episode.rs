@@ -6,8 +6,8 @@ use crate::episode::{
     parse_agent, parse_observability, parse_stop_risk, parse_termination, scan_string, EpisodeSpec,
 };
 use crate::learn::agent::{run_agent_episode, Policies};
-use crate::planfile::{self, PlanReadArgs};
-use crate::svg::{self, Scene};
+use crate::plot::svg::{self, Scene};
+use crate::world::planfile::{self, PlanReadArgs};
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use anyhow::{bail, Result};

@@ -5,8 +5,8 @@
 use super::{command_line, SensorArgs};
 use crate::episode::{parse_agent, parse_observability, parse_stop_risk, parse_termination};
 use crate::learn::agent::Policies;
-use crate::planfile::{self, PlanReadArgs};
-use crate::plans;
+use crate::world::planfile::{self, PlanReadArgs};
+use crate::world::plans;
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, EVAL_MAX_ACTIONS};
 use anyhow::{bail, Context, Result};

@@ -12,7 +12,7 @@ pub mod plan;
 pub mod policy;
 pub mod train;
 
-use crate::sensor::SensorModel;
+use crate::world::sensor::SensorModel;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::Path;

@@ -3,10 +3,10 @@
 
 use super::write_file;
 use crate::episode::EpisodeSpec;
-use crate::plans::{self, Family};
-use crate::sensor::SensorModel;
-use crate::svg::{self, Scene};
+use crate::plot::svg::{self, Scene};
 use crate::world::placement;
+use crate::world::plans::{self, Family};
+use crate::world::sensor::SensorModel;
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use anyhow::Result;

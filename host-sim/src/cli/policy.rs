@@ -1,6 +1,6 @@
 //! `activesense policy quantize` and `activesense policy agreement`: post-training int8
 //! quantisation of a float policy, and float-vs-int8 agreement on the test plans. (The
-//! `upload` and `info` subcommands talk to an instrument and live in [`crate::remote`].)
+//! `upload` and `info` subcommands talk to an instrument and live in [`crate::link::remote`].)
 
 use super::write_file;
 use crate::learn::agent::Policies;

@@ -22,7 +22,7 @@
 use super::record_episode;
 use crate::episode::{EpisodeSpec, Termination, Trajectory};
 use crate::learn::agent::LearntPolicy;
-use crate::plans;
+use crate::world::plans;
 use activesense_core::agents::{Action, AgentKind};
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::geometry::{length, v2};

@@ -32,8 +32,8 @@ use super::agent::{action_index, masked_features, shape_for, InputMask, ACTIONS}
 use super::file;
 use super::net::{self, Adam, BatchCache, NetShape, PolicyNet};
 use crate::episode::{score, start_episode, EpisodeSpec, Termination};
-use crate::plans;
-use crate::sensor::SensorModel;
+use crate::world::plans;
+use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::agents::{Action, AgentKind, BaselineAgent};
 use activesense_core::episode::EpisodeConfig;

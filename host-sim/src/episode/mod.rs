@@ -12,8 +12,8 @@
 //! `(plan_seed, episode_seed)` by SplitMix64, so changing the agent never changes the room or
 //! the noise it meets.
 
-use crate::plans;
-use crate::sensor::{RangeKind, SensorModel};
+use crate::world::plans;
+use crate::world::sensor::{RangeKind, SensorModel};
 use crate::world::{Placement, SimWorld};
 use activesense_core::agents::{Action, AgentKind, BaselineAgent};
 use activesense_core::episode::{EpisodeConfig, EpisodeState};
@@ -45,9 +45,9 @@ pub struct EpisodeSpec {
     pub termination: Termination,
     /// The user's room (`--plan`, `--plans-from`, `docs/PLANS.md`); `None`: the generated
     /// plan `plan_seed`. With a user room, `plan_seed` only feeds the seed derivation
-    /// ([`crate::planfile::NamedPlan::seed`]).
+    /// ([`crate::world::planfile::NamedPlan::seed`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub user_plan: Option<crate::planfile::NamedPlan>,
+    pub user_plan: Option<crate::world::planfile::NamedPlan>,
 }
 
 impl EpisodeSpec {

@@ -8,13 +8,13 @@
 //! additionally replays each episode in-process ([`activesense_core::instrument::run_local`])
 //! and fails unless actions, observations and report are bit-identical.
 
-use crate::device::{sim_episode, SimInstrument};
 use crate::episode::{
     parse_agent, parse_observability, parse_stop_risk, parse_termination, EpisodeSpec,
 };
-use crate::link::{self, EpisodeRun, Link, LinkSpec};
-use crate::plans::TEST_SEEDS;
-use crate::sensor::SensorModel;
+use crate::link::device::{sim_episode, SimInstrument};
+use crate::link::serial::{self, EpisodeRun, Link, LinkSpec};
+use crate::world::plans::TEST_SEEDS;
+use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
@@ -93,7 +93,7 @@ pub struct SimArgs {
     #[arg(long, num_args = 1..)]
     pub plans_from: Vec<PathBuf>,
     #[command(flatten)]
-    pub read: crate::planfile::PlanReadArgs,
+    pub read: crate::world::planfile::PlanReadArgs,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -121,7 +121,7 @@ pub struct SerialRunArgs {
     #[arg(long)]
     pub port: String,
     /// Baud rate.
-    #[arg(long, default_value_t = link::DEFAULT_BAUD)]
+    #[arg(long, default_value_t = serial::DEFAULT_BAUD)]
     pub baud: u32,
     /// Floor-plan file: our JSON {"vertices": [[x, y], ...]}, GeoJSON or DXF
     /// (`docs/PLANS.md`; metres unless --units, any orientation; it is re-centred on its
@@ -129,7 +129,7 @@ pub struct SerialRunArgs {
     #[arg(long)]
     pub plan: PathBuf,
     #[command(flatten)]
-    pub read: crate::planfile::PlanReadArgs,
+    pub read: crate::world::planfile::PlanReadArgs,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -142,7 +142,7 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
         bail!(
             "{} is a host-side benchmark (paper §4.3): OIGM needs the ground truth and EEM ray-casts {} belief hypotheses per bearing, so the instrument does not run them; use `activesense episode` or `activesense eval --agents {}`",
             a.agent.name(),
-            crate::greedy::EEM_PARTICLES,
+            crate::baselines::greedy::EEM_PARTICLES,
             a.agent.name()
         );
     }
@@ -351,7 +351,7 @@ fn run_one(
 /// `activesense sim`.
 pub fn cmd_sim(a: SimArgs) -> Result<()> {
     let timeout = Duration::from_millis(a.episode.timeout_ms);
-    let mut link = link::open_with_qemu_args(&a.link, timeout, &a.qemu_args)
+    let mut link = serial::open_with_qemu_args(&a.link, timeout, &a.qemu_args)
         .with_context(|| format!("opening {:?}", a.link))?;
     let info = link.client.hello().context("handshake")?;
     println!(
@@ -367,7 +367,8 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
         no_returns: 0,
         cost: 0.0,
     };
-    let rooms = crate::planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
+    let rooms =
+        crate::world::planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
     // Generated plans: one episode per plan seed. The user's rooms: `--episodes` episodes in
     // each, episode seeds episode-seed, episode-seed + 1, ...
     let specs: Vec<(String, EpisodeSpec)> = match &rooms {
@@ -423,12 +424,14 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
     Ok(())
 }
 
-/// Reads a plan file (our JSON, GeoJSON or DXF, metres; [`crate::planfile`]) into a
+/// Reads a plan file (our JSON, GeoJSON or DXF, metres; [`crate::world::planfile`]) into a
 /// model-frame plan.
 pub fn read_plan_file(path: &std::path::Path) -> Result<FloorPlan> {
-    Ok(crate::planfile::load_plan(path, &Default::default())?
-        .plan
-        .plan)
+    Ok(
+        crate::world::planfile::load_plan(path, &Default::default())?
+            .plan
+            .plan,
+    )
 }
 
 /// `activesense serial ...`.
@@ -445,7 +448,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             Ok(())
         }
         SerialCommand::Run(r) => {
-            let loaded = crate::planfile::load_plan(&r.plan, &r.read.options())?;
+            let loaded = crate::world::planfile::load_plan(&r.plan, &r.read.options())?;
             for w in &loaded.warnings {
                 eprintln!("warning: {}: {w}", loaded.plan.name);
             }
@@ -455,7 +458,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                 baud: r.baud,
             };
             let timeout = Duration::from_millis(r.episode.timeout_ms);
-            let mut link = link::open(&spec, timeout)?;
+            let mut link = serial::open(&spec, timeout)?;
             let info = link
                 .client
                 .hello()
@@ -510,7 +513,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
 #[derive(Args, Debug)]
 pub struct McuBenchArgs {
     /// Firmware ELF run in qemu-system-arm.
-    #[arg(long, default_value = link::DEFAULT_ELF)]
+    #[arg(long, default_value = serial::DEFAULT_ELF)]
     pub elf: PathBuf,
     /// Episodes per rotation-bin setting (plan seeds first-seed, first-seed+1, ...).
     #[arg(long, default_value_t = 10)]
@@ -617,7 +620,7 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
         .map(|s| s.to_string())
         .collect();
     let spec = LinkSpec::Qemu(a.elf.clone());
-    let mut link = link::open_with_qemu_args(&spec, timeout, &qemu_args)
+    let mut link = serial::open_with_qemu_args(&spec, timeout, &qemu_args)
         .with_context(|| format!("starting {} in QEMU", a.elf.display()))?;
     let info = link.client.hello().context("handshake")?;
     if info.capabilities & activesense_core::wire::CAP_CYCLE_COUNTS == 0 {
@@ -769,7 +772,7 @@ pub fn cmd_policy_upload(a: PolicyUploadArgs) -> Result<()> {
             )
         })?
         .rot_bins();
-    let mut link = link::open(&a.link, Duration::from_millis(a.timeout_ms))
+    let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
         .with_context(|| format!("opening {:?}", a.link))?;
     let info = link.client.hello().context("handshake")?;
     if info.capabilities & activesense_core::wire::CAP_POLICY_UPLOAD == 0 {
@@ -792,7 +795,7 @@ pub fn cmd_policy_upload(a: PolicyUploadArgs) -> Result<()> {
 
 /// Prints which policy serves K = 1 and K = 10 on the instrument.
 pub fn cmd_policy_info(a: PolicyInfoArgs) -> Result<()> {
-    let mut link = link::open(&a.link, Duration::from_millis(a.timeout_ms))
+    let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
         .with_context(|| format!("opening {:?}", a.link))?;
     let info = link.client.hello().context("handshake")?;
     println!("device: {} (protocol v{})", info.firmware, info.protocol);

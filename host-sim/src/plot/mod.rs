@@ -1,6 +1,8 @@
 //! The evaluation plot: recognition rate and pose error against the measurement budget,
 //! one line per agent, one row of two panels per rotation setting. Hand-written SVG like
-//! [`crate::svg`]: two line charts do not justify a plotting dependency.
+//! [`crate::plot::svg`]: two line charts do not justify a plotting dependency.
+
+pub mod svg;
 
 use crate::eval::{EvalReport, MAX_BUDGET};
 use std::fmt::Write;

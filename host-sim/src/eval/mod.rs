@@ -24,7 +24,7 @@
 
 use crate::episode::{score, EpisodeSpec, EpisodeView, Termination, Trajectory};
 use crate::learn::agent::{run_agent_episode_observed, Policies};
-use crate::sensor::SensorModel;
+use crate::world::sensor::SensorModel;
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use anyhow::{Context, Result};
@@ -70,7 +70,7 @@ pub struct EvalOptions {
     /// The user's rooms (`--plans-from`, `docs/PLANS.md`): when not empty they replace the
     /// generated plans, and `plans` is their number.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub user_plans: Vec<crate::planfile::NamedPlan>,
+    pub user_plans: Vec<crate::world::planfile::NamedPlan>,
     /// Plan files `--plans-from` refused, with why (listed in `results.md`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub refused_plans: Vec<String>,
@@ -1409,7 +1409,7 @@ mod tests {
             agents: vec![AgentKind::Heuristic1, AgentKind::Blind2],
             rot_bins: vec![1, 10],
             plans,
-            first_seed: crate::plans::TEST_SEEDS.start,
+            first_seed: crate::world::plans::TEST_SEEDS.start,
             episode_seed: 0,
             config: EpisodeConfig::default(),
             sensor: SensorModel::default(),
