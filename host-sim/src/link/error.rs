@@ -1,6 +1,6 @@
 //! The one error type of the host side of the link: what can go wrong talking to the
 //! device, whatever the transport ([`crate::link::serial`]) or the emulator
-//! ([`crate::link::qemu`]) it runs over. A leaf: it imports only the core's wire types.
+//! ([`crate::link::device::Qemu`]) it runs over. A leaf: it imports only the core's wire types.
 
 use activesense_core::wire::{FrameError, WireError};
 use std::io;

@@ -11,9 +11,8 @@
 //! [`LinkError::Timeout`], a closed link [`LinkError::Disconnected`], a device-side
 //! rejection [`LinkError::Device`] carrying the typed [`WireError`].
 
-use crate::link::device::{spawn_loopback, Pipe};
+use crate::link::device::{spawn_loopback, Pipe, Qemu};
 use crate::link::error::{LinkError, LinkResult};
-use crate::link::qemu::Qemu;
 use activesense_core::agents::Action;
 use activesense_core::episode::{Observation, SCAN_PIXELS};
 use activesense_core::instrument::Instrument;
