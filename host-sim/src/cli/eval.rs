@@ -114,7 +114,7 @@ fn parse_agents(s: &str) -> Result<AgentList, String> {
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
-    use crate::eval;
+    use crate::eval::{experiments, harness, report};
     use std::io::IsTerminal;
     if let Some(bad) = a.rot_bins.iter().find(|k| **k != 1 && **k != 10) {
         bail!("--rot-bins takes 1 and/or 10 (the paper's two settings), got {bad}");
@@ -129,7 +129,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     }
     let rooms = planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
     let (user_plans, refused) = rooms.unwrap_or_default();
-    let opts = eval::EvalOptions {
+    let opts = harness::EvalOptions {
         agents: a.agents.0.clone(),
         rot_bins,
         plans: if user_plans.is_empty() {
@@ -180,14 +180,14 @@ pub fn run(a: EvalArgs) -> Result<()> {
             opts.plans
         );
         let t0 = std::time::Instant::now();
-        let report = eval::extra_measurements(&opts, extra);
+        let report = experiments::extra_measurements(&opts, extra);
         std::fs::create_dir_all(&a.out)
             .with_context(|| format!("cannot create {}", a.out.display()))?;
-        let md = eval::extra_markdown(&report, &command);
+        let md = experiments::extra_markdown(&report, &command);
         for (name, body) in [
             ("extra.json", serde_json::to_string_pretty(&report)? + "\n"),
             ("extra.md", md.clone()),
-            ("extra.svg", eval::extra_svg(&report)),
+            ("extra.svg", experiments::extra_svg(&report)),
         ] {
             let p = a.out.join(name);
             std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
@@ -204,8 +204,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
         opts.plans,
         opts.agents.len() * opts.rot_bins.len() * opts.plans as usize
     );
-    let (report, timing) = eval::run(&opts);
-    let files = eval::write_outputs(&report, &timing, &a.out, &command)?;
+    let (report, timing) = harness::run(&opts);
+    let files = report::write_outputs(&report, &timing, &a.out, &command)?;
     println!("agent         bins  recognition  pose error (m)  measurements  rotations   cost");
     for r in &report.results {
         println!(

@@ -1,10 +1,22 @@
-//! The evaluation plot: recognition rate and pose error against the measurement budget,
-//! one line per agent, one row of two panels per rotation setting. Hand-written SVG like
-//! [`crate::plot::svg`]: two line charts do not justify a plotting dependency.
+//! Every picture the crate draws, as hand-written SVG (a few line charts and a floor-plan
+//! do not justify a plotting dependency), from plain numbers: this module never imports the
+//! evaluation or the trainer, they pass their data in.
+//!
+//! Here: the budget chart (recognition rate and pose error against the measurement budget,
+//! one line per agent, one row of two panels per rotation setting, [`budget_svg`]) and the
+//! generic multi-panel line chart [`line_panels`] with its shared legend. [`charts`] holds
+//! the evaluation's other charts (utility curves, reliability diagram, extra
+//! measurements), [`curve`] the trainer's learning curve, and [`svg`] the plan and episode
+//! scene.
 
+pub mod charts;
+pub mod curve;
 pub mod svg;
 
-use crate::eval::{EvalReport, MAX_BUDGET};
+pub use charts::{
+    extra_svg, reliability_svg, utility_svg, ExtraLine, ReliabilityLine, UtilityLine,
+};
+
 use std::fmt::Write;
 
 const COLOURS: [&str; 12] = [
@@ -22,11 +34,12 @@ struct Panel {
     x0: f64,
     y0: f64,
     ymax: f64,
+    max_budget: usize,
 }
 
 impl Panel {
     fn px(&self, budget: f64, y: f64) -> (f64, f64) {
-        let x = self.x0 + (budget - 1.0) / (MAX_BUDGET as f64 - 1.0) * PANEL_W;
+        let x = self.x0 + (budget - 1.0) / (self.max_budget as f64 - 1.0) * PANEL_W;
         let y = self.y0 + PANEL_H - (y / self.ymax).clamp(0.0, 1.0) * PANEL_H;
         (x, y)
     }
@@ -63,7 +76,7 @@ fn axes(
             fmt(t)
         );
     }
-    for b in (0..=MAX_BUDGET).step_by(5).skip(1).chain([1]) {
+    for b in (0..=p.max_budget).step_by(5).skip(1).chain([1]) {
         let (x, y) = p.px(b as f64, 0.0);
         let _ = writeln!(
             s,
@@ -85,15 +98,28 @@ fn axes(
     );
 }
 
-/// Renders the budget plot for every rotation setting in the report.
-pub fn budget_svg(report: &EvalReport) -> String {
-    let settings = &report.options.rot_bins;
-    let agents: Vec<String> = report
-        .options
-        .agents
-        .iter()
-        .map(|a| a.name().to_string())
-        .collect();
+/// One agent and rotation setting of the budget chart: recognition rate and mean pose error
+/// of the recognised episodes within budgets `1..=max_budget` measurements.
+pub struct BudgetLine<'a> {
+    /// Agent name (as in the legend order `agents`).
+    pub agent: &'a str,
+    /// Rotation bins.
+    pub rot_bins: u8,
+    /// Recognition rate within each budget.
+    pub recognition: &'a [f64],
+    /// Mean pose error of the recognised within each budget (`None`: none recognised yet).
+    pub pose_error: &'a [Option<f64>],
+}
+
+/// Renders the budget plot over `plans` plans for every rotation setting in `settings`,
+/// budgets `1..=max_budget`, agents in legend order `agents`.
+pub fn budget_svg(
+    plans: u32,
+    max_budget: usize,
+    settings: &[u8],
+    agents: &[String],
+    lines: &[BudgetLine<'_>],
+) -> String {
     let width = LEFT + 2.0 * PANEL_W + GAP_X + 170.0;
     let height = TOP + settings.len() as f64 * (PANEL_H + GAP_Y) + 20.0;
     let mut s = String::new();
@@ -105,15 +131,14 @@ pub fn budget_svg(report: &EvalReport) -> String {
     let _ = writeln!(
         s,
         r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">Recognition and pose error within a measurement budget ({} plans)</text>"#,
-        report.options.plans
+        plans
     );
     // Shared pose-error scale: the 90th percentile of the plotted means, rounded up to a
     // nice value, so one agent with a huge error does not flatten the others (lines above
     // the scale are clipped at the top edge).
-    let mut all: Vec<f64> = report
-        .results
+    let mut all: Vec<f64> = lines
         .iter()
-        .flat_map(|r| r.pose_error_by_budget.iter().flatten().copied())
+        .flat_map(|r| r.pose_error.iter().flatten().copied())
         .collect();
     all.sort_by(f64::total_cmp);
     let emax = all.get(all.len() * 9 / 10).copied().unwrap_or(0.0);
@@ -127,11 +152,13 @@ pub fn budget_svg(report: &EvalReport) -> String {
             x0: LEFT,
             y0,
             ymax: 1.0,
+            max_budget,
         };
         let err = Panel {
             x0: LEFT + PANEL_W + GAP_X,
             y0,
             ymax: emax,
+            max_budget,
         };
         let tag = if k == 1 {
             "1 rotation bin".to_string()
@@ -155,16 +182,12 @@ pub fn budget_svg(report: &EvalReport) -> String {
             &|v| format!("{v:.3}"),
         );
         for (ai, name) in agents.iter().enumerate() {
-            let Some(r) = report
-                .results
-                .iter()
-                .find(|r| &r.agent == name && r.rot_bins == k)
-            else {
+            let Some(r) = lines.iter().find(|r| r.agent == name && r.rot_bins == k) else {
                 continue;
             };
             let c = COLOURS[ai % COLOURS.len()];
             let pts: Vec<String> = r
-                .recognition_by_budget
+                .recognition
                 .iter()
                 .enumerate()
                 .map(|(i, v)| {
@@ -179,7 +202,7 @@ pub fn budget_svg(report: &EvalReport) -> String {
             );
             // Pose-error line: only where some episode was recognised within the budget.
             let mut seg: Vec<String> = Vec::new();
-            for (i, v) in r.pose_error_by_budget.iter().enumerate() {
+            for (i, v) in r.pose_error.iter().enumerate() {
                 if let Some(v) = v {
                     let (x, y) = err.px(i as f64 + 1.0, *v);
                     seg.push(format!("{x:.1},{y:.1}"));
