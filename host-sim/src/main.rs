@@ -72,9 +72,9 @@ enum PolicyCommand {
     Agreement(cli::policy::AgreementArgs),
     /// Upload an int8 policy into the instrument's RAM slot, replacing the one serving its
     /// K without reflashing (a corrupt or mismatched blob is refused; the old one serves on).
-    Upload(activesense_sim::link::remote::PolicyUploadArgs),
+    Upload(cli::policy::PolicyUploadArgs),
     /// Show which policy serves K = 1 and K = 10 on the instrument (built-in or uploaded).
-    Info(activesense_sim::link::remote::PolicyInfoArgs),
+    Info(cli::policy::PolicyInfoArgs),
 }
 
 fn main() -> ExitCode {
@@ -93,12 +93,8 @@ fn main() -> ExitCode {
         Command::McuBench(a) => activesense_sim::link::remote::cmd_mcu_bench(a),
         Command::Policy(PolicyCommand::Quantize(a)) => cli::policy::quantize(a),
         Command::Policy(PolicyCommand::Agreement(a)) => cli::policy::agreement(a),
-        Command::Policy(PolicyCommand::Upload(a)) => {
-            activesense_sim::link::remote::cmd_policy_upload(a)
-        }
-        Command::Policy(PolicyCommand::Info(a)) => {
-            activesense_sim::link::remote::cmd_policy_info(a)
-        }
+        Command::Policy(PolicyCommand::Upload(a)) => cli::policy::upload(a),
+        Command::Policy(PolicyCommand::Info(a)) => cli::policy::info(a),
         Command::Inspect(a) => activesense_sim::inspect::cmd_inspect(a, &command_line()),
     };
     match result {

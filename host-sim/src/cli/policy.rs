@@ -1,12 +1,14 @@
-//! `activesense policy quantize` and `activesense policy agreement`: post-training int8
-//! quantisation of a float policy, and float-vs-int8 agreement on the test plans. (The
-//! `upload` and `info` subcommands talk to an instrument and live in [`crate::link::remote`].)
+//! `activesense policy …`: post-training int8 quantisation of a float policy (`quantize`),
+//! float-vs-int8 agreement on the test plans (`agreement`), and, over a link to an
+//! instrument, uploading an int8 policy (`upload`) and asking which one serves (`info`).
 
 use super::write_file;
 use crate::learn::agent::Policies;
+use crate::link::serial::{self, LinkSpec};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 #[derive(Args)]
 pub struct QuantizeArgs {
@@ -130,5 +132,92 @@ pub fn agreement(a: AgreementArgs) -> Result<()> {
         write_file(path, &serde_json::to_string_pretty(&reports)?)?;
         println!("wrote {}", path.display());
     }
+    Ok(())
+}
+
+/// `activesense policy upload`.
+#[derive(Args, Debug)]
+pub struct PolicyUploadArgs {
+    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
+    #[arg(long)]
+    pub link: LinkSpec,
+    /// The int8 policy blob (`activesense policy quantize` output).
+    #[arg(long)]
+    pub int8: PathBuf,
+    /// Reply timeout in milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+}
+
+/// `activesense policy info`.
+#[derive(Args, Debug)]
+pub struct PolicyInfoArgs {
+    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
+    #[arg(long)]
+    pub link: LinkSpec,
+    /// Reply timeout in milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+}
+
+fn print_policy(i: &activesense_core::wire::PolicyInfo) {
+    println!(
+        "K = {:>2}: {:?}{}",
+        i.rot_bins,
+        i.source,
+        if i.len > 0 {
+            format!(" ({} bytes, crc {:08x})", i.len, i.crc)
+        } else {
+            String::new()
+        }
+    );
+}
+
+/// Uploads an int8 policy into the instrument's RAM slot (it serves its K until power-off
+/// or `Reset`; the built-in policy serves again after that). The device refuses a blob
+/// that is corrupt or for another K and keeps the policy it had.
+pub fn upload(a: PolicyUploadArgs) -> Result<()> {
+    let blob = std::fs::read(&a.int8)
+        .with_context(|| format!("cannot read int8 policy '{}'", a.int8.display()))?;
+    // Check locally first: a clear message beats a device error code.
+    let k = activesense_core::quantized::QuantizedPolicy::parse(&blob)
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "'{}' is not a usable int8 policy blob: {e}",
+                a.int8.display()
+            )
+        })?
+        .rot_bins();
+    let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
+        .with_context(|| format!("opening {:?}", a.link))?;
+    let info = link.client.hello().context("handshake")?;
+    if info.capabilities & activesense_core::wire::CAP_POLICY_UPLOAD == 0 {
+        bail!(
+            "the device ({}) does not accept policy uploads",
+            info.firmware
+        );
+    }
+    let bar = indicatif::ProgressBar::new(blob.len() as u64);
+    let installed = link
+        .client
+        .upload_policy(k, &blob, |n| bar.set_position(n as u64))
+        .with_context(|| format!("uploading '{}'", a.int8.display()))?;
+    bar.finish_and_clear();
+    println!("uploaded {} ({} bytes)", a.int8.display(), blob.len());
+    print_policy(&installed);
+    link.close().context("closing the link")?;
+    Ok(())
+}
+
+/// Prints which policy serves K = 1 and K = 10 on the instrument.
+pub fn info(a: PolicyInfoArgs) -> Result<()> {
+    let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
+        .with_context(|| format!("opening {:?}", a.link))?;
+    let info = link.client.hello().context("handshake")?;
+    println!("device: {} (protocol v{})", info.firmware, info.protocol);
+    for k in [1u8, 10] {
+        print_policy(&link.client.policy_info(k)?);
+    }
+    link.close().context("closing the link")?;
     Ok(())
 }

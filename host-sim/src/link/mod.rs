@@ -4,7 +4,7 @@
 //! command line is built in [`qemu_cmd`] (one place, shared with `cargo xtask`); [`error`] is
 //! the link's error type; [`serial`] is the protocol client and the
 //! transports (loopback, TCP, serial port, QEMU); [`remote`] holds the commands that drive an
-//! instrument (`sim`, `serial`, `mcu-bench`, `policy upload/info`).
+//! instrument (`sim`, `serial`, `mcu-bench`; `policy upload/info` are in [`crate::cli::policy`]).
 
 pub mod device;
 pub mod error;
