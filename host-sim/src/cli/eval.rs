@@ -121,12 +121,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
     }
     let mut rot_bins = a.rot_bins.clone();
     rot_bins.dedup();
-    if let Some(n) = a.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build_global()
-            .context("cannot set the thread count")?;
-    }
+    super::set_threads(a.threads)?;
     let rooms = planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
     let (user_plans, refused) = rooms.unwrap_or_default();
     let opts = harness::EvalOptions {

@@ -2,7 +2,7 @@
 //! and write the policy file, its learning curve and logs.
 
 use super::command_line;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -76,12 +76,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
             a.rot_bins
         );
     }
-    if let Some(n) = a.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build_global()
-            .context("cannot set the thread count")?;
-    }
+    super::set_threads(a.threads)?;
     let mut hp = train::HyperParams::defaults(a.rot_bins);
     hp.seed = a.seed;
     hp.updates = a.updates;

@@ -98,7 +98,10 @@ impl EpisodeSpec {
     }
 }
 
-/// SplitMix64 finaliser: decorrelates nearby seeds.
+/// SplitMix64 finaliser: decorrelates nearby seeds. The host's one copy (the trainer uses
+/// it too); the core has the same finaliser privately in `pipeline.rs`
+/// (`registration_seed`). When the core exports a public `splitmix64`, this function
+/// goes and its callers use the core's.
 pub fn splitmix64(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);

@@ -202,6 +202,7 @@ pub fn same_run(a: &EpisodeRun, b: &EpisodeRun) -> bool {
         && a.report.cost.to_bits() == b.report.cost.to_bits()
 }
 
+#[derive(Default)]
 struct Totals {
     /// Pose errors of the episodes with an estimate (m).
     pose_errors: Vec<f32>,
@@ -359,14 +360,7 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
         info.firmware, info.protocol, info.capabilities, info.max_vertices, info.max_actions
     );
     let start = Instant::now();
-    let mut t = Totals {
-        pose_errors: Vec::new(),
-        episodes: 0,
-        actions: 0,
-        measurements: 0,
-        no_returns: 0,
-        cost: 0.0,
-    };
+    let mut t = Totals::default();
     let rooms =
         crate::world::planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
     // Generated plans: one episode per plan seed. The user's rooms: `--episodes` episodes in
@@ -464,14 +458,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                 .hello()
                 .with_context(|| format!("handshake on {}", r.port))?;
             println!("device: {} (protocol v{})", info.firmware, info.protocol);
-            let mut t = Totals {
-                pose_errors: Vec::new(),
-                episodes: 0,
-                actions: 0,
-                measurements: 0,
-                no_returns: 0,
-                cost: 0.0,
-            };
+            let mut t = Totals::default();
             let start = Instant::now();
             for i in 0..r.episode.episodes {
                 let spec = spec_for(0, &r.episode)?;

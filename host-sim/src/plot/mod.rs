@@ -122,16 +122,10 @@ pub fn budget_svg(
 ) -> String {
     let width = LEFT + 2.0 * PANEL_W + GAP_X + 170.0;
     let height = TOP + settings.len() as f64 * (PANEL_H + GAP_Y) + 20.0;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
-    );
-    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
-    let _ = writeln!(
-        s,
-        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">Recognition and pose error within a measurement budget ({} plans)</text>"#,
-        plans
+    let mut s = svg_head(
+        width,
+        height,
+        &format!("Recognition and pose error within a measurement budget ({plans} plans)"),
     );
     // Shared pose-error scale: the 90th percentile of the plotted means, rounded up to a
     // nice value, so one agent with a huge error does not flatten the others (lines above
@@ -277,17 +271,7 @@ pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String 
         .max(LEFT + columns as f64 * (PANEL_W + GAP_X) + 80.0);
     let height =
         (TOP + rows as f64 * (PANEL_H + GAP_Y) + 20.0).max(TOP + 40.0 + 20.0 * names.len() as f64);
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
-    );
-    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
-    let _ = writeln!(
-        s,
-        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">{}</text>"#,
-        xml(title)
-    );
+    let mut s = svg_head(width, height, title);
     for (i, p) in panels.iter().enumerate() {
         let x0 = LEFT + (i % columns) as f64 * (PANEL_W + GAP_X);
         let y0 = TOP + 20.0 + (i / columns) as f64 * (PANEL_H + GAP_Y);
@@ -389,6 +373,23 @@ pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String 
         );
     }
     let _ = writeln!(s, "</svg>");
+    s
+}
+
+/// The opening of a chart: the `<svg>` element of `width` × `height`, a white background
+/// and the bold title line.
+fn svg_head(width: f64, height: f64, title: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
+    );
+    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
+    let _ = writeln!(
+        s,
+        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">{}</text>"#,
+        xml(title)
+    );
     s
 }
 
