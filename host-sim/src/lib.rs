@@ -5,17 +5,17 @@
 //!
 //! | module | what it holds |
 //! |---|---|
-//! | [`world`] | the seeded floor-plan generator ([`world::plans`]), the user's own plans ([`world::planfile`]: JSON, GeoJSON, DXF), the simulated sensors ([`world::sensor`]) and the simulated instrument's world ([`world::SimWorld`]) |
-//! | [`episode`] | the in-process episode: [`episode::EpisodeSpec`], the runner and its [`episode::Trajectory`] log |
-//! | [`baselines`] | the greedy benchmarks ([`baselines::greedy`]: OIGM, EEM) and the classical grid Markov localizer ([`baselines::classical`]) |
-//! | [`plot`] | every picture: the plan/trajectory scene ([`plot::svg`]), the evaluation charts and the trainer's learning curve, all from plain data |
-//! | [`learn`] | the learned actor-critic policy: network, policy file, int8 quantisation, training |
-//! | [`eval`] | the evaluation harness (the paper's Table 4): episodes, statistics, the markdown report, the extra-measurements experiment |
-//! | [`bench`] | the localization and registration benchmarks |
+//! | [`world`] | the simulated instrument's world ([`world::SimWorld`], placement); [`world::plans`] the seeded floor-plan generator (training and test seed ranges); [`world::planfile`] the user's own plans (JSON, GeoJSON, DXF); [`world::sensor`] the simulated EDM and topological scan |
+//! | [`episode`] | the in-process episode: [`episode::EpisodeSpec`], the runner, its [`episode::Trajectory`] log, the host's seed mixing |
+//! | [`baselines`] | [`baselines::greedy`] the greedy benchmarks (OIGM, OIGM-cost, EEM); [`baselines::classical`] the classical grid Markov localizer |
+//! | [`plot`] | every picture, from plain numbers: the budget chart and the generic line chart ([`plot`]), the evaluation's other charts ([`plot::charts`]), the trainer's learning curve ([`plot::curve`]), the plan and episode scene ([`plot::svg`]) |
+//! | [`learn`] | the learned actor-critic policy: [`learn::agent`], [`learn::net`], the policy file ([`learn::file`]), int8 quantisation ([`learn::quantize`]), training ([`learn::train`]) |
+//! | [`eval`] | the evaluation harness (the paper's Table 4): [`eval::record`] one episode's row and curve, [`eval::stats`] intervals and aggregation, [`eval::harness`] the parallel run, [`eval::paper`] the paper's numbers, [`eval::report`] results.md and the output files, [`eval::experiments`] the extra-measurements analysis |
+//! | [`bench`] | [`bench::localization`] GHT vs the classical localizer; [`bench::registration`] sparse-registration accuracy |
 //! | [`calibrate`] | the fit of the calibrated stop |
-//! | [`inspect`] | the inspection tool: trajectory pages and the guided-back-propagation analysis |
-//! | [`link`] | the instrument serial protocol (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a thread, and the commands that drive it |
-//! | [`cli`] | the bodies of the `activesense` commands; the binary (`src/main.rs`) is the clap tree only |
+//! | [`inspect`] | the inspection tool: trajectory pages and ([`inspect::aggregate`]) the guided-back-propagation analysis |
+//! | [`link`] | the instrument serial protocol (`docs/protocol.md`): [`link::device`] the simulated instrument, the loopback device and the QEMU launcher; [`link::qemu_cmd`] the one QEMU command line (shared with xtask); [`link::error`] the link's errors; [`link::serial`] the protocol client and its transports; [`link::remote`] the `sim`, `serial` and `mcu-bench` commands |
+//! | [`cli`] | the bodies of the `activesense` commands, one module each ([`cli::plan`], [`cli::episode`], [`cli::train`], [`cli::dataset`], [`cli::eval`], [`cli::bench_registration`], [`cli::bench_localization`], [`cli::policy`]); the binary (`src/main.rs`) is the clap tree only |
 
 pub mod baselines;
 pub mod bench;
