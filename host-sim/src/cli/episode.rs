@@ -4,6 +4,7 @@
 use super::{write_file, SensorArgs};
 use crate::episode::{
     parse_agent, parse_observability, parse_stop_risk, parse_termination, scan_string, EpisodeSpec,
+    Trajectory,
 };
 use crate::learn::agent::{run_agent_episode, Policies};
 use crate::plot::svg::{self, Scene};
@@ -74,7 +75,17 @@ pub struct EpisodeArgs {
     quiet: bool,
 }
 
+/// Runs one episode and prints its log (or, with `--quiet`, its summary) and outcome.
 pub fn run(a: EpisodeArgs) -> Result<()> {
+    let spec = spec_of(&a)?;
+    let (policies, t) = play(&a, &spec)?;
+    print_log(&spec, &t, &policies, a.quiet);
+    print_outcome(&t);
+    write_outputs(&a, &spec, &t)
+}
+
+/// The episode the options describe (a generated plan or the user's room).
+fn spec_of(a: &EpisodeArgs) -> Result<EpisodeSpec> {
     if a.rot_bins != 1 && a.rot_bins != 10 {
         bail!(
             "--rot-bins must be 1 or 10 (the paper's two settings), got {}",
@@ -88,7 +99,7 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
         }
         None => None,
     };
-    let spec = EpisodeSpec {
+    Ok(EpisodeSpec {
         plan_seed: match &user_plan {
             Some(p) => p.seed(),
             None => a.seed.unwrap_or_default(),
@@ -106,7 +117,11 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
         },
         sensor: a.sensor.model()?,
         termination: a.termination,
-    };
+    })
+}
+
+/// Loads the policy the agent needs and plays the episode.
+fn play(a: &EpisodeArgs, spec: &EpisodeSpec) -> Result<(Policies, Trajectory)> {
     let mut policies = Policies::default();
     match spec.agent {
         AgentKind::Learnt => policies = Policies::load(a.policy.as_slice(), &[spec.rot_bins])?,
@@ -115,9 +130,14 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
     }
     // The learnt float policy's episodes carry the inspection data (`activesense inspect`).
     let t = match policies.for_rot_bins(spec.rot_bins) {
-        Some(p) if spec.agent == AgentKind::Learnt => crate::inspect::record_episode(&spec, p),
-        _ => run_agent_episode(&spec, &policies)?,
+        Some(p) if spec.agent == AgentKind::Learnt => crate::inspect::record_episode(spec, p),
+        _ => run_agent_episode(spec, &policies)?,
     };
+    Ok((policies, t))
+}
+
+/// The policies used, the episode's header and truth, and (unless `quiet`) every step.
+fn print_log(spec: &EpisodeSpec, t: &Trajectory, policies: &Policies, quiet: bool) {
     for p in policies.iter() {
         println!("policy: {}", p.path.display());
     }
@@ -138,7 +158,7 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
         t.truth.y,
         t.truth.theta.to_degrees()
     );
-    if !a.quiet {
+    if !quiet {
         println!("step  action        bearing  range       scan (left..right)    cost   entropy");
         println!(
             "   -  start         {:7.1}°  {:<10}  {}",
@@ -164,6 +184,10 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
             );
         }
     }
+}
+
+/// How the episode ended: recognition, coarse and refined estimates, the stop's risk.
+fn print_outcome(t: &Trajectory) {
     println!(
         "end: {:?} after {} actions ({} measurements, {} rotations), cost {:.3}",
         t.end, t.summary.actions, t.summary.measurements, t.summary.rotations, t.summary.cost
@@ -229,12 +253,17 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
             o.answer_readings, readings
         );
     }
+}
+
+/// The trajectory JSON (`--json`) and the episode picture (`--svg`).
+fn write_outputs(a: &EpisodeArgs, spec: &EpisodeSpec, t: &Trajectory) -> Result<()> {
+    let o = &t.outcome;
     if let Some(path) = &a.json {
         // The inspection arrays (K × 900 floats per step) are written compactly.
         let text = if t.inspection.is_some() {
-            serde_json::to_string(&t)?
+            serde_json::to_string(t)?
         } else {
-            serde_json::to_string_pretty(&t)?
+            serde_json::to_string_pretty(t)?
         };
         write_file(path, &text)?;
         println!("wrote {}", path.display());
@@ -249,7 +278,7 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
             ),
             placement: Some(t.placement),
             agent: Some(t.truth),
-            trajectory: Some(&t),
+            trajectory: Some(t),
             estimate: o.refined.map(|r| r.pose),
         };
         write_file(path, &svg::render(&t.plan, &scene))?;
