@@ -11,7 +11,7 @@
 //! | [`plot`] | every picture, from plain numbers: the budget chart and the generic line chart ([`plot`]), the evaluation's other charts ([`plot::charts`]), the trainer's learning curve ([`plot::curve`]), the plan and episode scene ([`plot::svg`]) |
 //! | [`learn`] | the learned actor-critic policy: [`learn::agent`], [`learn::net`], the policy file ([`learn::file`]), int8 quantisation ([`learn::quantize`]), training ([`learn::train`]) |
 //! | [`eval`] | the evaluation harness (the paper's Table 4): [`eval::record`] one episode's row and curve, [`eval::stats`] intervals and aggregation, [`eval::harness`] the parallel run, [`eval::paper`] the paper's numbers, [`eval::report`] results.md and the output files, [`eval::experiments`] the extra-measurements analysis |
-//! | [`bench`] | [`bench::localization`] GHT vs the classical localizer; [`bench::registration`] sparse-registration accuracy |
+//! | [`bench`](mod@bench) | [`bench::localization`] GHT vs the classical localizer; [`bench::registration`] sparse-registration accuracy |
 //! | [`calibrate`] | the fit of the calibrated stop |
 //! | [`inspect`] | the inspection tool: trajectory pages and ([`inspect::aggregate`]) the guided-back-propagation analysis |
 //! | [`link`] | the instrument serial protocol (`docs/protocol.md`): [`link::device`] the simulated instrument, the loopback device and the QEMU launcher; [`link::qemu_cmd`] the one QEMU command line (shared with xtask); [`link::error`] the link's errors; [`link::serial`] the protocol client and its transports; [`link::remote`] the `sim`, `serial` and `mcu-bench` commands |

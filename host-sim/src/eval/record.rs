@@ -1,6 +1,6 @@
 //! What one evaluated episode leaves behind: its summary row ([`EpisodeRow`]) and its state
-//! sampled on the utility curve's cost grid ([`EpisodeCurve`], recorded by
-//! [`CurveRecorder`] while the episode runs), with the grids themselves (the measurement
+//! sampled on the utility curve's cost grid (`EpisodeCurve`, recorded by
+//! `CurveRecorder` while the episode runs), with the grids themselves (the measurement
 //! budgets, the cost points). The lowest layer of [`crate::eval`]: [`super::stats`]
 //! aggregates these, [`super::harness`] produces them.
 

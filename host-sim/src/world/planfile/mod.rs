@@ -16,7 +16,7 @@
 //! one-line message starts with the file (and room) and names the vertex or entity at
 //! fault; nothing here panics on bad input.
 //!
-//! The GeoJSON and DXF readers are [`from_geojson`] and [`from_dxf`]; this module validates and
+//! The GeoJSON and DXF readers are `from_geojson` and `from_dxf`; this module validates and
 //! centres what they (and our JSON reader) return.
 
 mod from_dxf;
