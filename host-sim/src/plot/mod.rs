@@ -211,19 +211,7 @@ pub fn budget_svg(
             }
         }
     }
-    // Legend.
-    let lx = LEFT + 2.0 * PANEL_W + GAP_X + 20.0;
-    for (ai, name) in agents.iter().enumerate() {
-        let y = TOP + 30.0 + ai as f64 * 20.0;
-        let c = COLOURS[ai % COLOURS.len()];
-        let _ = writeln!(
-            s,
-            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{c}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{name}</text>"#,
-            lx + 24.0,
-            lx + 30.0,
-            y + 4.0
-        );
-    }
+    legend(&mut s, LEFT + 2.0 * PANEL_W + GAP_X + 20.0, agents);
     s.push_str("</svg>\n");
     s
 }
@@ -359,19 +347,11 @@ pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String 
             flush(&mut run, &mut s);
         }
     }
-    let lx = LEFT + columns as f64 * (PANEL_W + GAP_X) - GAP_X + 20.0;
-    for (i, name) in names.iter().enumerate() {
-        let y = TOP + 30.0 + i as f64 * 20.0;
-        let c = COLOURS[i % COLOURS.len()];
-        let _ = writeln!(
-            s,
-            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{c}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{}</text>"#,
-            lx + 24.0,
-            lx + 30.0,
-            y + 4.0,
-            xml(name)
-        );
-    }
+    legend(
+        &mut s,
+        LEFT + columns as f64 * (PANEL_W + GAP_X) - GAP_X + 20.0,
+        &names,
+    );
     let _ = writeln!(s, "</svg>");
     s
 }
@@ -391,6 +371,22 @@ fn svg_head(width: f64, height: f64, title: &str) -> String {
         xml(title)
     );
     s
+}
+
+/// The shared legend at `lx`: one coloured line and name per series, in colour order.
+fn legend<S: AsRef<str>>(s: &mut String, lx: f64, names: &[S]) {
+    for (i, name) in names.iter().enumerate() {
+        let y = TOP + 30.0 + i as f64 * 20.0;
+        let c = COLOURS[i % COLOURS.len()];
+        let _ = writeln!(
+            s,
+            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{c}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{}</text>"#,
+            lx + 24.0,
+            lx + 30.0,
+            y + 4.0,
+            xml(name.as_ref())
+        );
+    }
 }
 
 fn tick(v: f64) -> String {
