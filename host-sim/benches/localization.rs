@@ -6,8 +6,8 @@
 
 use activesense_core::localization::{GhtLocalizer, LocalizerConfig};
 use activesense_core::math::TAU;
-use activesense_sim::classical::{ClassicalConfig, ClassicalLocalizer};
-use activesense_sim::plans;
+use activesense_sim::baselines::classical::{ClassicalConfig, ClassicalLocalizer};
+use activesense_sim::world::plans;
 use activesense_sim::world::SimWorld;
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 

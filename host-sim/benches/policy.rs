@@ -12,7 +12,7 @@ use activesense_core::runner::EpisodeRunner;
 use activesense_sim::episode::{run_episode, start_episode, EpisodeSpec};
 use activesense_sim::learn::agent::{features, shape_for, LearntAgent};
 use activesense_sim::learn::net::{BatchCache, PolicyNet, Scratch};
-use activesense_sim::plans;
+use activesense_sim::world::plans;
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use std::sync::Arc;
 

@@ -19,7 +19,7 @@ use activesense_core::localization::grid::CellIndex;
 use activesense_core::pipeline::Termination;
 use activesense_core::stop::StopModel;
 use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
-use activesense_sim::plans::TEST_SEEDS;
+use activesense_sim::world::plans::TEST_SEEDS;
 use rayon::prelude::*;
 
 /// After one reading: readings so far, answer right, argmax right, risk estimate, and

@@ -13,7 +13,7 @@
 //! alike) and the report as `calibration.md` / `calibration.json`.
 
 use crate::episode::{parse_agent, Termination};
-use crate::eval::{episode_bar, EvalOptions};
+use crate::eval::harness::{episode_bar, EvalOptions};
 use crate::learn::agent::{run_agent_episode_observed, Policies};
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::EpisodeConfig;

@@ -1,31 +1,30 @@
 //! # activesense-sim
 //!
-//! The std side of activesense: the seeded floor-plan generator ([`plans`]), the simulated
-//! instrument and its sensors ([`world`], [`sensor`]), the episode runner with its
-//! trajectory log ([`episode`]), the evaluation harness ([`eval`], [`plot`]) and SVG
-//! rendering ([`svg`]); the classical grid Markov localizer ([`classical`]) and the
-//! localization / registration benchmarks ([`bench_localization`], [`bench_registration`]);
-//! the learned actor-critic policy network and its policy file format ([`learn`]); the
-//! inspection tool: trajectory pages and the guided-back-propagation analysis ([`inspect`]).
-//! [`link`], [`device`] and [`remote`] talk the instrument serial protocol
-//! (`docs/protocol.md`) to the firmware (QEMU, serial, TCP) or to the core session in a
-//! thread. [`planfile`] reads the user's own floor plans (JSON, GeoJSON, DXF). [`calibrate`] fits the calibrated stop. The `activesense` binary (`src/main.rs`) is the command-line front end.
+//! The std side of activesense. Modules, lowest first (a module imports only from those
+//! above it in this list, plus `activesense_core`):
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`world`] | the simulated instrument's world ([`world::SimWorld`], placement); [`world::plans`] the seeded floor-plan generator (training and test seed ranges); [`world::planfile`] the user's own plans (JSON, GeoJSON, DXF); [`world::sensor`] the simulated EDM and topological scan |
+//! | [`episode`] | the in-process episode: [`episode::EpisodeSpec`], the runner, its [`episode::Trajectory`] log, the host's seed mixing |
+//! | [`baselines`] | [`baselines::greedy`] the greedy benchmarks (OIGM, OIGM-cost, EEM); [`baselines::classical`] the classical grid Markov localizer |
+//! | [`plot`] | every picture, from plain numbers: the budget chart and the generic line chart ([`plot`]), the evaluation's other charts ([`plot::charts`]), the trainer's learning curve ([`plot::curve`]), the plan and episode scene ([`plot::svg`]) |
+//! | [`learn`] | the learned actor-critic policy: [`learn::agent`], [`learn::net`], the policy file ([`learn::file`]), int8 quantisation ([`learn::quantize`]), training ([`learn::train`]) |
+//! | [`eval`] | the evaluation harness (the paper's Table 4): [`eval::record`] one episode's row and curve, [`eval::stats`] intervals and aggregation, [`eval::harness`] the parallel run, [`eval::paper`] the paper's numbers, [`eval::report`] results.md and the output files, [`eval::experiments`] the extra-measurements analysis |
+//! | [`bench`](mod@bench) | [`bench::localization`] GHT vs the classical localizer; [`bench::registration`] sparse-registration accuracy |
+//! | [`calibrate`] | the fit of the calibrated stop |
+//! | [`inspect`] | the inspection tool: trajectory pages and ([`inspect::aggregate`]) the guided-back-propagation analysis |
+//! | [`link`] | the instrument serial protocol (`docs/protocol.md`): [`link::device`] the simulated instrument, the loopback device and the QEMU launcher; [`link::qemu_cmd`] the one QEMU command line (shared with xtask); [`link::error`] the link's errors; [`link::serial`] the protocol client and its transports; [`link::remote`] the `sim`, `serial` and `mcu-bench` commands |
+//! | [`cli`] | the bodies of the `activesense` commands, one module each ([`cli::plan`], [`cli::episode`], [`cli::train`], [`cli::dataset`], [`cli::eval`], [`cli::bench_registration`], [`cli::bench_localization`], [`cli::policy`]); the binary (`src/main.rs`) is the clap tree only |
 
-pub mod bench_localization;
-pub mod bench_registration;
+pub mod baselines;
+pub mod bench;
 pub mod calibrate;
-pub mod classical;
-pub mod device;
+pub mod cli;
 pub mod episode;
 pub mod eval;
-pub mod greedy;
 pub mod inspect;
 pub mod learn;
 pub mod link;
-pub mod planfile;
-pub mod plans;
 pub mod plot;
-pub mod remote;
-pub mod sensor;
-pub mod svg;
 pub mod world;

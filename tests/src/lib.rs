@@ -10,12 +10,13 @@ use activesense_core::episode::Termination;
 use activesense_core::episode::{Action, AgentKind};
 use activesense_core::protocol::*;
 use activesense_core::world::floorplan::PlanError;
-use activesense_sim::device::sim_episode;
 use activesense_sim::episode::{EndReason, EpisodeSpec, Trajectory};
 use activesense_sim::learn::agent::{run_agent_episode, Int8Policy, Policies};
-use activesense_sim::link::{Client, LinkError};
-use activesense_sim::plans::TEST_SEEDS;
-use activesense_sim::remote::{reference_run, same_run};
+use activesense_sim::link::device::sim_episode;
+use activesense_sim::link::error::LinkError;
+use activesense_sim::link::remote::{reference_run, same_run};
+use activesense_sim::link::serial::Client;
+use activesense_sim::world::plans::TEST_SEEDS;
 use std::io::{Read, Write};
 use std::path::PathBuf;
 
@@ -387,7 +388,7 @@ pub fn firmware_elf() -> PathBuf {
         .status()
         .expect("run cargo to build the firmware");
     assert!(status.success(), "building the firmware failed");
-    root.join(activesense_sim::link::DEFAULT_ELF)
+    root.join(activesense_sim::link::serial::DEFAULT_ELF)
 }
 
 /// Runs one learnt-int8 episode on the device and checks its actions against the host

@@ -3,8 +3,8 @@
 
 use activesense_core::device::{Session, SessionConfig};
 use activesense_core::protocol::Phase;
-use activesense_sim::device::{serve_std, Pipe, HOST_DEVICE};
-use activesense_sim::link::{self, Client, LinkSpec};
+use activesense_sim::link::device::{serve_std, Pipe, HOST_DEVICE};
+use activesense_sim::link::serial::{self, Client, LinkSpec};
 use activesense_tests::{
     check_episodes, check_episodes_with, confident_stop, fault_suite, host_actions, host_episode,
     spec,
@@ -13,7 +13,7 @@ use std::time::Duration;
 
 #[test]
 fn loopback_episodes_are_bit_identical_to_in_process_runs() {
-    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    let mut l = serial::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
     l.client.hello().unwrap();
     assert!(check_episodes(&mut l.client, 10, 1) > 0);
     assert!(check_episodes(&mut l.client, 10, 10) > 0);
@@ -27,7 +27,7 @@ fn loopback_confident_stop_rule_matches_host() {
     const STOP_RISK: f32 = 0.05;
     const MIN_OBSERVABILITY: f32 = 0.2;
     const EPISODES: u32 = 4;
-    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    let mut l = serial::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
     l.client.hello().unwrap();
     let mut rule_matters = 0;
     for rot_bins in [1, 10] {
@@ -57,7 +57,7 @@ fn loopback_confident_stop_rule_matches_host() {
 fn loopback_unstopped_confident_episodes_answer_alike() {
     const EPISODES: u32 = 6;
     let adjust = confident_stop(1e-6, 0.0);
-    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    let mut l = serial::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
     l.client.hello().unwrap();
     assert!(check_episodes_with(&mut l.client, EPISODES, 10, &adjust) > 0);
     l.close().unwrap();
@@ -76,14 +76,14 @@ fn loopback_unstopped_confident_episodes_answer_alike() {
 
 #[test]
 fn loopback_policy_upload() {
-    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    let mut l = serial::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
     activesense_tests::policy_upload_suite(&mut l.client);
     l.close().unwrap();
 }
 
 #[test]
 fn loopback_fault_suite() {
-    let mut l = link::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    let mut l = serial::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
     fault_suite(&mut l.client);
     check_episodes(&mut l.client, 2, 10);
     l.close().unwrap();
@@ -102,7 +102,7 @@ fn device_survives_hosts_that_disappear() {
     let t = std::thread::spawn(move || {
         let mut c = Client::new(host);
         c.hello().unwrap();
-        let (plan, params, _) = activesense_sim::device::sim_episode(&spec(0, 10));
+        let (plan, params, _) = activesense_sim::link::device::sim_episode(&spec(0, 10));
         c.load_plan(&plan).unwrap();
         c.call(&activesense_core::protocol::Request::StartEpisode(params))
             .unwrap();
@@ -116,7 +116,7 @@ fn device_survives_hosts_that_disappear() {
     let t = std::thread::spawn(move || {
         let mut c = Client::new(host);
         c.hello().unwrap();
-        let (plan, params, _) = activesense_sim::device::sim_episode(&spec(1, 1));
+        let (plan, params, _) = activesense_sim::link::device::sim_episode(&spec(1, 1));
         c.load_plan(&plan).unwrap();
         c.call(&activesense_core::protocol::Request::StartEpisode(params))
             .unwrap();

@@ -2,7 +2,7 @@
 //! USART1 on a local TCP socket. The ELF is built by [`firmware_elf`] (cargo, thumb target,
 //! `firmware` profile) unless `ACTIVESENSE_FIRMWARE_ELF` names one.
 
-use activesense_sim::link::{self, LinkSpec};
+use activesense_sim::link::serial::{self, LinkSpec};
 use activesense_tests::{
     check_episodes, check_episodes_with, confident_stop, fault_suite, firmware_elf,
 };
@@ -11,7 +11,7 @@ use std::time::Duration;
 #[test]
 fn qemu_firmware_episodes_bit_identical_and_faults() {
     let elf = firmware_elf();
-    let mut l = link::open(&LinkSpec::Qemu(elf), Duration::from_secs(10)).expect("start qemu");
+    let mut l = serial::open(&LinkSpec::Qemu(elf), Duration::from_secs(10)).expect("start qemu");
     let info = l.client.hello().expect("hello");
     assert!(info.firmware.starts_with("activesense-fw"), "{info:?}");
     // 20 episodes: 10 with the heading known (K = 1), 10 with K = 10.
@@ -35,8 +35,8 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
 /// work is ordered as it must be (rotation < K = 1 vote < K = 10 vote).
 #[test]
 fn qemu_instruction_counts_reproducible() {
-    use activesense_sim::plans::TEST_SEEDS;
-    use activesense_sim::remote::{mcu_bench, McuBenchArgs};
+    use activesense_sim::link::remote::{mcu_bench, McuBenchArgs};
+    use activesense_sim::world::plans::TEST_SEEDS;
     let args = McuBenchArgs {
         elf: firmware_elf(),
         episodes: 2,

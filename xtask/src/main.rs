@@ -13,6 +13,10 @@
 //! ```
 
 mod fuzz;
+// The emulator's command line, shared with the host's `qemu` link (why by path: see the file).
+#[path = "../../host-sim/src/link/qemu_cmd.rs"]
+#[allow(dead_code)] // xtask boots with USART1 on null only
+mod qemu_cmd;
 mod qemu_log;
 mod reproduce;
 mod size;
@@ -192,31 +196,12 @@ fn build_firmware() -> Result<PathBuf> {
     Ok(elf)
 }
 
-/// QEMU command line for the netduinoplus2 board with semihosting; serial0 is USART1.
-pub fn qemu_command(elf: &Path) -> Command {
-    let mut c = Command::new("qemu-system-arm");
-    c.args([
-        "-cpu",
-        "cortex-m4",
-        "-machine",
-        "netduinoplus2",
-        "-nographic",
-        "-monitor",
-        "none",
-        "-semihosting-config",
-        "enable=on,target=native",
-        "-kernel",
-    ])
-    .arg(elf);
-    c
-}
-
 /// Boots `elf` under QEMU in smoke mode (the firmware exits after its boot line instead of
 /// serving USART1) and waits, bounded, for it to exit. Returns its captured output: stdout is
 /// the plain console, stderr the binary defmt frames (and QEMU's own diagnostics).
 pub fn smoke_boot(elf: &Path) -> Result<std::process::Output> {
-    let mut cmd = qemu_command(elf);
-    cmd.args(["-serial", "null", "-append", "smoke"])
+    let mut cmd = qemu_cmd::qemu_command("qemu-system-arm", elf, qemu_cmd::QemuSerial::Null);
+    cmd.args(["-append", "smoke"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     eprintln!("xtask: running {cmd:?}");

@@ -22,7 +22,7 @@
 use super::record_episode;
 use crate::episode::{EpisodeSpec, Termination, Trajectory};
 use crate::learn::agent::LearntPolicy;
-use crate::plans;
+use crate::world::plans;
 use activesense_core::agents::{Action, AgentKind};
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::geometry::{length, v2};
@@ -292,7 +292,7 @@ pub struct AggregateReport {
 
 /// Runs `opts.plans` learnt-policy episodes with inspection and aggregates their guided maps.
 pub fn run(opts: &AggregateOptions, policy: &LearntPolicy, command: &str) -> AggregateReport {
-    let bar = crate::eval::episode_bar(u64::from(opts.plans), opts.progress);
+    let bar = crate::eval::harness::episode_bar(u64::from(opts.plans), opts.progress);
     // Per-episode sums come back in plan order and are added in that order: the result
     // does not depend on the thread count.
     let per: Vec<([Acc; 2], bool, [bool; 2])> = (0..opts.plans)

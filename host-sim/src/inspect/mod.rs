@@ -280,7 +280,7 @@ pub fn write_page(trajectory: &Path, out: &Path) -> Result<()> {
 mod tests {
     use super::*;
     use crate::learn::agent::{default_policy_path, run_agent_episode, Policies};
-    use crate::plans;
+    use crate::world::plans;
     use activesense_core::agents::AgentKind;
 
     fn scratch(name: &str) -> std::path::PathBuf {

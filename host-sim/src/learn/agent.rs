@@ -463,7 +463,7 @@ pub fn run_agent_episode_observed(
                 spec.world_seed(),
             )
             .truth();
-            let mut agent = crate::greedy::OigmAgent::new(
+            let mut agent = crate::baselines::greedy::OigmAgent::new(
                 plan,
                 truth,
                 spec.sensor,
@@ -474,7 +474,7 @@ pub fn run_agent_episode_observed(
         }
         AgentKind::Eem => {
             let plan = spec.plan();
-            let mut agent = crate::greedy::EemAgent::new(plan, spec.sensor, spec.config);
+            let mut agent = crate::baselines::greedy::EemAgent::new(plan, spec.sensor, spec.config);
             timed(spec, &mut agent)
         }
         _ => timed(spec, &mut BaselineAgent::new(spec.agent, spec.agent_seed())),

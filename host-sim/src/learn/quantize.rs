@@ -25,8 +25,8 @@
 use super::agent::{argmax, features, shape_for, LearntAgent, ACTIONS};
 use super::net::{PolicyNet, Scratch, ARCH_ID, N_LAYERS};
 use crate::episode::{run_episode_with, EpisodeSpec, Termination, Trajectory};
-use crate::plans;
-use crate::sensor::SensorModel;
+use crate::world::plans;
+use crate::world::sensor::SensorModel;
 use activesense_core::agents::{Action, AgentKind};
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::policy::{Policy, PolicyInput, SIDE_FEATURES};

@@ -33,8 +33,8 @@ use super::file;
 pub use super::hyper::HyperParams;
 use super::net::{self, Adam, BatchCache, NetShape, PolicyNet};
 use crate::episode::{score, start_episode, EpisodeSpec, Termination};
-use crate::plans;
-use crate::sensor::SensorModel;
+use crate::world::plans;
+use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::agents::{Action, AgentKind, BaselineAgent};
 use activesense_core::episode::EpisodeConfig;
@@ -613,94 +613,30 @@ fn progress_bar(show: bool, updates: u64) -> ProgressBar {
     b
 }
 
-/// The learning curve: mean return, recognition and cost against environment steps.
+/// The learning curve: mean return, recognition and cost against environment steps
+/// (drawn by [`crate::plot::curve`]).
 pub fn curve_svg(log: &[LogRow], hp: &HyperParams) -> String {
-    const W: f64 = 520.0;
-    const H: f64 = 160.0;
-    const LEFT: f64 = 70.0;
-    const TOP: f64 = 50.0;
-    const GAP: f64 = 60.0;
-    type Panel = (&'static str, fn(&LogRow) -> f64);
-    let panels: [Panel; 3] = [
-        ("mean return", |r| r.mean_return),
-        ("recognition (coarse success)", |r| r.recognition),
-        ("action cost per episode", |r| r.cost),
-    ];
-    let xmax = log
-        .last()
-        .map(|r| r.env_steps as f64)
-        .unwrap_or(1.0)
-        .max(1.0);
-    let total_h = TOP + 3.0 * (H + GAP) + 20.0;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{:.0}" height="{total_h:.0}" font-family="sans-serif" font-size="12">"#,
-        LEFT + W + 40.0
-    );
-    let _ = writeln!(
-        s,
-        r#"<text x="{LEFT}" y="24" font-size="15" font-weight="bold">Learning curve: K = {}, seed {}, {} envs × {} steps per update</text>"#,
-        hp.rot_bins, hp.seed, hp.num_envs, hp.segment_len
-    );
-    for (pi, (title, f)) in panels.iter().enumerate() {
-        let y0 = TOP + pi as f64 * (H + GAP);
-        let ys: Vec<f64> = log.iter().map(f).collect();
-        let (mut lo, mut hi) = ys
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &y| {
-                (a.min(y), b.max(y))
-            });
-        if !lo.is_finite() {
-            (lo, hi) = (0.0, 1.0);
-        }
-        if hi - lo < 1e-6 {
-            hi = lo + 1.0;
-        }
-        let px = |x: f64| LEFT + x / xmax * W;
-        let py = |y: f64| y0 + H - (y - lo) / (hi - lo) * H;
-        let _ = writeln!(
-            s,
-            r##"<rect x="{LEFT}" y="{y0}" width="{W}" height="{H}" fill="none" stroke="#444"/><text x="{LEFT}" y="{:.1}" font-weight="bold">{title}</text>"##,
-            y0 - 8.0
-        );
-        for k in 0..=4 {
-            let v = lo + (hi - lo) * k as f64 / 4.0;
-            let _ = writeln!(
-                s,
-                r##"<line x1="{LEFT}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end" font-size="10">{v:.3}</text>"##,
-                LEFT + W,
-                LEFT - 5.0,
-                py(v) + 3.0,
-                y = py(v)
-            );
-        }
-        // Imitation phase shaded.
-        if let Some(last_im) = log.iter().rev().find(|r| r.phase == "imitation") {
-            let _ = writeln!(
-                s,
-                r##"<rect x="{LEFT}" y="{y0}" width="{:.1}" height="{H}" fill="#f2e6ff" opacity="0.6"/>"##,
-                px(last_im.env_steps as f64) - LEFT
-            );
-        }
-        let pts: Vec<String> = log
-            .iter()
-            .map(|r| format!("{:.1},{:.1}", px(r.env_steps as f64), py(f(r))))
-            .collect();
-        let _ = writeln!(
-            s,
-            r##"<polyline points="{}" fill="none" stroke="#1b6ac9" stroke-width="1.5"/>"##,
-            pts.join(" ")
-        );
-        let _ = writeln!(
-            s,
-            r#"<text x="{:.1}" y="{:.1}" text-anchor="end" font-size="10">environment steps (max {xmax:.0}); shaded: imitation warm start</text>"#,
-            LEFT + W,
-            y0 + H + 16.0
-        );
-    }
-    s.push_str("</svg>\n");
-    s
+    use crate::plot::curve::{learning_curve_svg, CurvePanel};
+    let panel = |title, f: fn(&LogRow) -> f64| CurvePanel {
+        title,
+        values: log.iter().map(f).collect(),
+    };
+    learning_curve_svg(
+        &format!(
+            "Learning curve: K = {}, seed {}, {} envs × {} steps per update",
+            hp.rot_bins, hp.seed, hp.num_envs, hp.segment_len
+        ),
+        &log.iter().map(|r| r.env_steps as f64).collect::<Vec<_>>(),
+        &[
+            panel("mean return", |r| r.mean_return),
+            panel("recognition (coarse success)", |r| r.recognition),
+            panel("action cost per episode", |r| r.cost),
+        ],
+        log.iter()
+            .rev()
+            .find(|r| r.phase == "imitation")
+            .map(|r| r.env_steps as f64),
+    )
 }
 
 /// Writes `text` to `path`, creating parent directories.

@@ -8,13 +8,13 @@
 //! additionally replays each episode in-process ([`activesense_core::instrument::run_local`])
 //! and fails unless actions, observations and report are bit-identical.
 
-use crate::device::{sim_episode, SimInstrument};
 use crate::episode::{
     parse_agent, parse_observability, parse_stop_risk, parse_termination, EpisodeSpec,
 };
-use crate::link::{self, EpisodeRun, Link, LinkSpec};
-use crate::plans::TEST_SEEDS;
-use crate::sensor::SensorModel;
+use crate::link::device::{sim_episode, SimInstrument};
+use crate::link::serial::{self, EpisodeRun, Link, LinkSpec};
+use crate::world::plans::TEST_SEEDS;
+use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::agents::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
@@ -93,7 +93,7 @@ pub struct SimArgs {
     #[arg(long, num_args = 1..)]
     pub plans_from: Vec<PathBuf>,
     #[command(flatten)]
-    pub read: crate::planfile::PlanReadArgs,
+    pub read: crate::world::planfile::PlanReadArgs,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -121,7 +121,7 @@ pub struct SerialRunArgs {
     #[arg(long)]
     pub port: String,
     /// Baud rate.
-    #[arg(long, default_value_t = link::DEFAULT_BAUD)]
+    #[arg(long, default_value_t = serial::DEFAULT_BAUD)]
     pub baud: u32,
     /// Floor-plan file: our JSON {"vertices": [[x, y], ...]}, GeoJSON or DXF
     /// (`docs/PLANS.md`; metres unless --units, any orientation; it is re-centred on its
@@ -129,7 +129,7 @@ pub struct SerialRunArgs {
     #[arg(long)]
     pub plan: PathBuf,
     #[command(flatten)]
-    pub read: crate::planfile::PlanReadArgs,
+    pub read: crate::world::planfile::PlanReadArgs,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -142,7 +142,7 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
         bail!(
             "{} is a host-side benchmark (paper §4.3): OIGM needs the ground truth and EEM ray-casts {} belief hypotheses per bearing, so the instrument does not run them; use `activesense episode` or `activesense eval --agents {}`",
             a.agent.name(),
-            crate::greedy::EEM_PARTICLES,
+            crate::baselines::greedy::EEM_PARTICLES,
             a.agent.name()
         );
     }
@@ -202,6 +202,7 @@ pub fn same_run(a: &EpisodeRun, b: &EpisodeRun) -> bool {
         && a.report.cost.to_bits() == b.report.cost.to_bits()
 }
 
+#[derive(Default)]
 struct Totals {
     /// Pose errors of the episodes with an estimate (m).
     pose_errors: Vec<f32>,
@@ -351,7 +352,7 @@ fn run_one(
 /// `activesense sim`.
 pub fn cmd_sim(a: SimArgs) -> Result<()> {
     let timeout = Duration::from_millis(a.episode.timeout_ms);
-    let mut link = link::open_with_qemu_args(&a.link, timeout, &a.qemu_args)
+    let mut link = serial::open_with_qemu_args(&a.link, timeout, &a.qemu_args)
         .with_context(|| format!("opening {:?}", a.link))?;
     let info = link.client.hello().context("handshake")?;
     println!(
@@ -359,15 +360,9 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
         info.firmware, info.protocol, info.capabilities, info.max_vertices, info.max_actions
     );
     let start = Instant::now();
-    let mut t = Totals {
-        pose_errors: Vec::new(),
-        episodes: 0,
-        actions: 0,
-        measurements: 0,
-        no_returns: 0,
-        cost: 0.0,
-    };
-    let rooms = crate::planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
+    let mut t = Totals::default();
+    let rooms =
+        crate::world::planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
     // Generated plans: one episode per plan seed. The user's rooms: `--episodes` episodes in
     // each, episode seeds episode-seed, episode-seed + 1, ...
     let specs: Vec<(String, EpisodeSpec)> = match &rooms {
@@ -423,12 +418,14 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
     Ok(())
 }
 
-/// Reads a plan file (our JSON, GeoJSON or DXF, metres; [`crate::planfile`]) into a
+/// Reads a plan file (our JSON, GeoJSON or DXF, metres; [`crate::world::planfile`]) into a
 /// model-frame plan.
 pub fn read_plan_file(path: &std::path::Path) -> Result<FloorPlan> {
-    Ok(crate::planfile::load_plan(path, &Default::default())?
-        .plan
-        .plan)
+    Ok(
+        crate::world::planfile::load_plan(path, &Default::default())?
+            .plan
+            .plan,
+    )
 }
 
 /// `activesense serial ...`.
@@ -445,7 +442,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             Ok(())
         }
         SerialCommand::Run(r) => {
-            let loaded = crate::planfile::load_plan(&r.plan, &r.read.options())?;
+            let loaded = crate::world::planfile::load_plan(&r.plan, &r.read.options())?;
             for w in &loaded.warnings {
                 eprintln!("warning: {}: {w}", loaded.plan.name);
             }
@@ -455,20 +452,13 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                 baud: r.baud,
             };
             let timeout = Duration::from_millis(r.episode.timeout_ms);
-            let mut link = link::open(&spec, timeout)?;
+            let mut link = serial::open(&spec, timeout)?;
             let info = link
                 .client
                 .hello()
                 .with_context(|| format!("handshake on {}", r.port))?;
             println!("device: {} (protocol v{})", info.firmware, info.protocol);
-            let mut t = Totals {
-                pose_errors: Vec::new(),
-                episodes: 0,
-                actions: 0,
-                measurements: 0,
-                no_returns: 0,
-                cost: 0.0,
-            };
+            let mut t = Totals::default();
             let start = Instant::now();
             for i in 0..r.episode.episodes {
                 let spec = spec_for(0, &r.episode)?;
@@ -499,7 +489,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
 #[derive(Args, Debug)]
 pub struct McuBenchArgs {
     /// Firmware ELF run in qemu-system-arm.
-    #[arg(long, default_value = link::DEFAULT_ELF)]
+    #[arg(long, default_value = serial::DEFAULT_ELF)]
     pub elf: PathBuf,
     /// Episodes per rotation-bin setting (plan seeds first-seed, first-seed+1, ...).
     #[arg(long, default_value_t = 10)]
@@ -606,7 +596,7 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
         .map(|s| s.to_string())
         .collect();
     let spec = LinkSpec::Qemu(a.elf.clone());
-    let mut link = link::open_with_qemu_args(&spec, timeout, &qemu_args)
+    let mut link = serial::open_with_qemu_args(&spec, timeout, &qemu_args)
         .with_context(|| format!("starting {} in QEMU", a.elf.display()))?;
     let info = link.client.hello().context("handshake")?;
     if info.capabilities & activesense_core::wire::CAP_CYCLE_COUNTS == 0 {
@@ -702,92 +692,5 @@ pub fn cmd_mcu_bench(a: McuBenchArgs) -> Result<()> {
     );
     print!("{}", mcu_bench_table(&rows));
     eprintln!("mcu-bench: {:.1} s", t0.elapsed().as_secs_f64());
-    Ok(())
-}
-
-/// `activesense policy upload`.
-#[derive(Args, Debug)]
-pub struct PolicyUploadArgs {
-    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
-    #[arg(long)]
-    pub link: LinkSpec,
-    /// The int8 policy blob (`activesense policy quantize` output).
-    #[arg(long)]
-    pub int8: PathBuf,
-    /// Reply timeout in milliseconds.
-    #[arg(long, default_value_t = 5000)]
-    pub timeout_ms: u64,
-}
-
-/// `activesense policy info`.
-#[derive(Args, Debug)]
-pub struct PolicyInfoArgs {
-    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
-    #[arg(long)]
-    pub link: LinkSpec,
-    /// Reply timeout in milliseconds.
-    #[arg(long, default_value_t = 5000)]
-    pub timeout_ms: u64,
-}
-
-fn print_policy(i: &activesense_core::wire::PolicyInfo) {
-    println!(
-        "K = {:>2}: {:?}{}",
-        i.rot_bins,
-        i.source,
-        if i.len > 0 {
-            format!(" ({} bytes, crc {:08x})", i.len, i.crc)
-        } else {
-            String::new()
-        }
-    );
-}
-
-/// Uploads an int8 policy into the instrument's RAM slot (it serves its K until power-off
-/// or `Reset`; the built-in policy serves again after that). The device refuses a blob
-/// that is corrupt or for another K and keeps the policy it had.
-pub fn cmd_policy_upload(a: PolicyUploadArgs) -> Result<()> {
-    let blob = std::fs::read(&a.int8)
-        .with_context(|| format!("cannot read int8 policy '{}'", a.int8.display()))?;
-    // Check locally first: a clear message beats a device error code.
-    let k = activesense_core::quantized::QuantizedPolicy::parse(&blob)
-        .map_err(|e| {
-            anyhow::anyhow!(
-                "'{}' is not a usable int8 policy blob: {e}",
-                a.int8.display()
-            )
-        })?
-        .rot_bins();
-    let mut link = link::open(&a.link, Duration::from_millis(a.timeout_ms))
-        .with_context(|| format!("opening {:?}", a.link))?;
-    let info = link.client.hello().context("handshake")?;
-    if info.capabilities & activesense_core::wire::CAP_POLICY_UPLOAD == 0 {
-        bail!(
-            "the device ({}) does not accept policy uploads",
-            info.firmware
-        );
-    }
-    let bar = indicatif::ProgressBar::new(blob.len() as u64);
-    let installed = link
-        .client
-        .upload_policy(k, &blob, |n| bar.set_position(n as u64))
-        .with_context(|| format!("uploading '{}'", a.int8.display()))?;
-    bar.finish_and_clear();
-    println!("uploaded {} ({} bytes)", a.int8.display(), blob.len());
-    print_policy(&installed);
-    link.close().context("closing the link")?;
-    Ok(())
-}
-
-/// Prints which policy serves K = 1 and K = 10 on the instrument.
-pub fn cmd_policy_info(a: PolicyInfoArgs) -> Result<()> {
-    let mut link = link::open(&a.link, Duration::from_millis(a.timeout_ms))
-        .with_context(|| format!("opening {:?}", a.link))?;
-    let info = link.client.hello().context("handshake")?;
-    println!("device: {} (protocol v{})", info.firmware, info.protocol);
-    for k in [1u8, 10] {
-        print_policy(&link.client.policy_info(k)?);
-    }
-    link.close().context("closing the link")?;
     Ok(())
 }

@@ -4,77 +4,24 @@
 //!
 //! The device decides; the host only answers its action requests. [`Client::run_episode`]
 //! drives one episode: it sends `StartEpisode`, then for every `Act { step, action }` asks
-//! its [`Instrument`] (the simulated world, see [`crate::device::SimInstrument`]) for the
+//! its [`Instrument`] (the simulated world, see [`crate::link::device::SimInstrument`]) for the
 //! observation and sends it back, until `Done`.
 //!
 //! Timeouts come from the transport's read timeout; a silent device is a
 //! [`LinkError::Timeout`], a closed link [`LinkError::Disconnected`], a device-side
 //! rejection [`LinkError::Device`] carrying the typed [`WireError`].
 
-use crate::device::{spawn_loopback, Pipe, Qemu};
+use crate::link::device::{spawn_loopback, Pipe, Qemu};
+use crate::link::error::{LinkError, LinkResult};
 use activesense_core::agents::Action;
 use activesense_core::episode::{Observation, SCAN_PIXELS};
 use activesense_core::instrument::Instrument;
 use activesense_core::wire::*;
 use activesense_core::{FloorPlan, MAX_VERTICES};
 use heapless::Vec as HVec;
-use std::io::{self, Read, Write};
+use std::io::{Read, Write};
 use std::path::PathBuf;
 use std::time::Duration;
-
-/// Everything that can go wrong talking to the device.
-#[derive(Debug)]
-pub enum LinkError {
-    /// No reply within the transport's timeout.
-    Timeout,
-    /// The link closed (EOF / broken pipe / device gone).
-    Disconnected,
-    /// Other I/O failure.
-    Io(io::Error),
-    /// The device rejected the request.
-    Device(WireError),
-    /// The device answered something the protocol does not allow here.
-    Unexpected(String),
-    /// The device is not compatible with this host (protocol or limits).
-    Incompatible(String),
-    /// A frame from the device failed to decode.
-    BadFrame(FrameError),
-    /// A local error (plan too large, transport setup...).
-    Local(String),
-}
-
-impl std::fmt::Display for LinkError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            LinkError::Timeout => write!(f, "timed out waiting for the device"),
-            LinkError::Disconnected => write!(f, "the device link closed"),
-            LinkError::Io(e) => write!(f, "link I/O error: {e}"),
-            LinkError::Device(e) => write!(f, "device error: {e}"),
-            LinkError::Unexpected(s) => write!(f, "unexpected reply from the device: {s}"),
-            LinkError::Incompatible(s) => write!(f, "incompatible device: {s}"),
-            LinkError::BadFrame(e) => write!(f, "corrupt frame from the device: {e:?}"),
-            LinkError::Local(s) => write!(f, "{s}"),
-        }
-    }
-}
-
-impl std::error::Error for LinkError {}
-
-impl From<io::Error> for LinkError {
-    fn from(e: io::Error) -> Self {
-        match e.kind() {
-            io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock => LinkError::Timeout,
-            io::ErrorKind::UnexpectedEof
-            | io::ErrorKind::BrokenPipe
-            | io::ErrorKind::ConnectionReset
-            | io::ErrorKind::ConnectionAborted => LinkError::Disconnected,
-            _ => LinkError::Io(e),
-        }
-    }
-}
-
-/// Result alias.
-pub type LinkResult<T> = Result<T, LinkError>;
 
 /// One episode as seen by the host: every (action, observation) and the device's report.
 #[derive(Clone, Debug, PartialEq)]

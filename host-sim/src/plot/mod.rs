@@ -1,8 +1,22 @@
-//! The evaluation plot: recognition rate and pose error against the measurement budget,
-//! one line per agent, one row of two panels per rotation setting. Hand-written SVG like
-//! [`crate::svg`]: two line charts do not justify a plotting dependency.
+//! Every picture the crate draws, as hand-written SVG (a few line charts and a floor-plan
+//! do not justify a plotting dependency), from plain numbers: this module never imports the
+//! evaluation or the trainer, they pass their data in.
+//!
+//! Here: the budget chart (recognition rate and pose error against the measurement budget,
+//! one line per agent, one row of two panels per rotation setting, [`budget_svg`]) and the
+//! generic multi-panel line chart [`line_panels`] with its shared legend. [`charts`] holds
+//! the evaluation's other charts (utility curves, reliability diagram, extra
+//! measurements), [`curve`] the trainer's learning curve, and [`svg`] the plan and episode
+//! scene.
 
-use crate::eval::{EvalReport, MAX_BUDGET};
+pub mod charts;
+pub mod curve;
+pub mod svg;
+
+pub use charts::{
+    extra_svg, reliability_svg, utility_svg, ExtraLine, ReliabilityLine, UtilityLine,
+};
+
 use std::fmt::Write;
 
 const COLOURS: [&str; 12] = [
@@ -20,11 +34,12 @@ struct Panel {
     x0: f64,
     y0: f64,
     ymax: f64,
+    max_budget: usize,
 }
 
 impl Panel {
     fn px(&self, budget: f64, y: f64) -> (f64, f64) {
-        let x = self.x0 + (budget - 1.0) / (MAX_BUDGET as f64 - 1.0) * PANEL_W;
+        let x = self.x0 + (budget - 1.0) / (self.max_budget as f64 - 1.0) * PANEL_W;
         let y = self.y0 + PANEL_H - (y / self.ymax).clamp(0.0, 1.0) * PANEL_H;
         (x, y)
     }
@@ -61,7 +76,7 @@ fn axes(
             fmt(t)
         );
     }
-    for b in (0..=MAX_BUDGET).step_by(5).skip(1).chain([1]) {
+    for b in (0..=p.max_budget).step_by(5).skip(1).chain([1]) {
         let (x, y) = p.px(b as f64, 0.0);
         let _ = writeln!(
             s,
@@ -83,35 +98,41 @@ fn axes(
     );
 }
 
-/// Renders the budget plot for every rotation setting in the report.
-pub fn budget_svg(report: &EvalReport) -> String {
-    let settings = &report.options.rot_bins;
-    let agents: Vec<String> = report
-        .options
-        .agents
-        .iter()
-        .map(|a| a.name().to_string())
-        .collect();
+/// One agent and rotation setting of the budget chart: recognition rate and mean pose error
+/// of the recognised episodes within budgets `1..=max_budget` measurements.
+pub struct BudgetLine<'a> {
+    /// Agent name (as in the legend order `agents`).
+    pub agent: &'a str,
+    /// Rotation bins.
+    pub rot_bins: u8,
+    /// Recognition rate within each budget.
+    pub recognition: &'a [f64],
+    /// Mean pose error of the recognised within each budget (`None`: none recognised yet).
+    pub pose_error: &'a [Option<f64>],
+}
+
+/// Renders the budget plot over `plans` plans for every rotation setting in `settings`,
+/// budgets `1..=max_budget`, agents in legend order `agents`.
+pub fn budget_svg(
+    plans: u32,
+    max_budget: usize,
+    settings: &[u8],
+    agents: &[String],
+    lines: &[BudgetLine<'_>],
+) -> String {
     let width = LEFT + 2.0 * PANEL_W + GAP_X + 170.0;
     let height = TOP + settings.len() as f64 * (PANEL_H + GAP_Y) + 20.0;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
-    );
-    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
-    let _ = writeln!(
-        s,
-        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">Recognition and pose error within a measurement budget ({} plans)</text>"#,
-        report.options.plans
+    let mut s = svg_head(
+        width,
+        height,
+        &format!("Recognition and pose error within a measurement budget ({plans} plans)"),
     );
     // Shared pose-error scale: the 90th percentile of the plotted means, rounded up to a
     // nice value, so one agent with a huge error does not flatten the others (lines above
     // the scale are clipped at the top edge).
-    let mut all: Vec<f64> = report
-        .results
+    let mut all: Vec<f64> = lines
         .iter()
-        .flat_map(|r| r.pose_error_by_budget.iter().flatten().copied())
+        .flat_map(|r| r.pose_error.iter().flatten().copied())
         .collect();
     all.sort_by(f64::total_cmp);
     let emax = all.get(all.len() * 9 / 10).copied().unwrap_or(0.0);
@@ -125,11 +146,13 @@ pub fn budget_svg(report: &EvalReport) -> String {
             x0: LEFT,
             y0,
             ymax: 1.0,
+            max_budget,
         };
         let err = Panel {
             x0: LEFT + PANEL_W + GAP_X,
             y0,
             ymax: emax,
+            max_budget,
         };
         let tag = if k == 1 {
             "1 rotation bin".to_string()
@@ -153,16 +176,12 @@ pub fn budget_svg(report: &EvalReport) -> String {
             &|v| format!("{v:.3}"),
         );
         for (ai, name) in agents.iter().enumerate() {
-            let Some(r) = report
-                .results
-                .iter()
-                .find(|r| &r.agent == name && r.rot_bins == k)
-            else {
+            let Some(r) = lines.iter().find(|r| r.agent == name && r.rot_bins == k) else {
                 continue;
             };
             let c = COLOURS[ai % COLOURS.len()];
             let pts: Vec<String> = r
-                .recognition_by_budget
+                .recognition
                 .iter()
                 .enumerate()
                 .map(|(i, v)| {
@@ -177,7 +196,7 @@ pub fn budget_svg(report: &EvalReport) -> String {
             );
             // Pose-error line: only where some episode was recognised within the budget.
             let mut seg: Vec<String> = Vec::new();
-            for (i, v) in r.pose_error_by_budget.iter().enumerate() {
+            for (i, v) in r.pose_error.iter().enumerate() {
                 if let Some(v) = v {
                     let (x, y) = err.px(i as f64 + 1.0, *v);
                     seg.push(format!("{x:.1},{y:.1}"));
@@ -192,19 +211,7 @@ pub fn budget_svg(report: &EvalReport) -> String {
             }
         }
     }
-    // Legend.
-    let lx = LEFT + 2.0 * PANEL_W + GAP_X + 20.0;
-    for (ai, name) in agents.iter().enumerate() {
-        let y = TOP + 30.0 + ai as f64 * 20.0;
-        let c = COLOURS[ai % COLOURS.len()];
-        let _ = writeln!(
-            s,
-            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{c}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{name}</text>"#,
-            lx + 24.0,
-            lx + 30.0,
-            y + 4.0
-        );
-    }
+    legend(&mut s, LEFT + 2.0 * PANEL_W + GAP_X + 20.0, agents);
     s.push_str("</svg>\n");
     s
 }
@@ -252,17 +259,7 @@ pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String 
         .max(LEFT + columns as f64 * (PANEL_W + GAP_X) + 80.0);
     let height =
         (TOP + rows as f64 * (PANEL_H + GAP_Y) + 20.0).max(TOP + 40.0 + 20.0 * names.len() as f64);
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
-    );
-    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
-    let _ = writeln!(
-        s,
-        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">{}</text>"#,
-        xml(title)
-    );
+    let mut s = svg_head(width, height, title);
     for (i, p) in panels.iter().enumerate() {
         let x0 = LEFT + (i % columns) as f64 * (PANEL_W + GAP_X);
         let y0 = TOP + 20.0 + (i / columns) as f64 * (PANEL_H + GAP_Y);
@@ -350,7 +347,34 @@ pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String 
             flush(&mut run, &mut s);
         }
     }
-    let lx = LEFT + columns as f64 * (PANEL_W + GAP_X) - GAP_X + 20.0;
+    legend(
+        &mut s,
+        LEFT + columns as f64 * (PANEL_W + GAP_X) - GAP_X + 20.0,
+        &names,
+    );
+    let _ = writeln!(s, "</svg>");
+    s
+}
+
+/// The opening of a chart: the `<svg>` element of `width` × `height`, a white background
+/// and the bold title line.
+fn svg_head(width: f64, height: f64, title: &str) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
+    );
+    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
+    let _ = writeln!(
+        s,
+        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">{}</text>"#,
+        xml(title)
+    );
+    s
+}
+
+/// The shared legend at `lx`: one coloured line and name per series, in colour order.
+fn legend<S: AsRef<str>>(s: &mut String, lx: f64, names: &[S]) {
     for (i, name) in names.iter().enumerate() {
         let y = TOP + 30.0 + i as f64 * 20.0;
         let c = COLOURS[i % COLOURS.len()];
@@ -360,11 +384,9 @@ pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String 
             lx + 24.0,
             lx + 30.0,
             y + 4.0,
-            xml(name)
+            xml(name.as_ref())
         );
     }
-    let _ = writeln!(s, "</svg>");
-    s
 }
 
 fn tick(v: f64) -> String {

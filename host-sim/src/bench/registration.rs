@@ -14,8 +14,8 @@
 //! `‖â − a‖`, the heading error, and the symmetry-aware pose distance of §3.4
 //! ([`PoseDistance::agent_distance`]), each as median / p90 / p99 / max and a histogram.
 
-use crate::plans;
-use crate::sensor::SensorModel;
+use crate::world::plans;
+use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::math::{wrap_angle, TAU};
@@ -225,7 +225,7 @@ fn take_measurements(world: &SimWorld, n: usize, rng: &mut Pcg32) -> (Vec<Measur
                     .measure(world.plan(), truth.translation(), truth.theta + beta, rng);
             if let Some(r) = r {
                 if r > 0.0 {
-                    outliers += (kind == crate::sensor::RangeKind::Outlier) as usize;
+                    outliers += (kind == crate::world::sensor::RangeKind::Outlier) as usize;
                     out.push(Measurement::new(beta, r));
                     break;
                 }

@@ -1,5 +1,5 @@
 //! Side-by-side benchmark of the GHT localizer (`activesense_core::localization`) and the
-//! classical grid Markov localizer ([`crate::classical`]) on the same generated test plans,
+//! classical grid Markov localizer ([`crate::baselines::classical`]) on the same generated test plans,
 //! in one run (paper §3.2, Table 1): up-front cost (R-table vs ray-cast tables), cost per
 //! measurement update, memory, and recognition (symmetry-aware coarse success of the
 //! argmax) after k measurements at several outlier rates.
@@ -13,9 +13,9 @@
 //! Symmetry orders for the coarse-success test come from [`cyclic_order`], a vertex-set
 //! check that stands in for the project's symmetry detector.
 
-use crate::classical::{ClassicalConfig, ClassicalLocalizer};
-use crate::plans::{self, TEST_SEEDS};
-use crate::sensor::SensorModel;
+use crate::baselines::classical::{ClassicalConfig, ClassicalLocalizer};
+use crate::world::plans::{self, TEST_SEEDS};
+use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::geometry::rotate;

@@ -7,8 +7,16 @@
 //! the distance from the centre to the nearest wall, and its initial heading uniformly from
 //! [0, 2π). The ground truth is the [`AgentPose`](activesense_core::Pose2) `(a, h)` in the
 //! model frame (see `docs/ARCHITECTURE.md`, "Frames").
+//!
+//! The submodules make the rooms and the sensors: [`plans`] is the seeded floor-plan
+//! generator (training and test seed ranges), [`planfile`] reads the user's own plans (JSON,
+//! GeoJSON, DXF), and [`sensor`] simulates the EDM and the topological scan.
 
-use crate::sensor::{RangeKind, SensorModel};
+pub mod planfile;
+pub mod plans;
+pub mod sensor;
+
+use crate::world::sensor::{RangeKind, SensorModel};
 use activesense_core::agents::Action;
 use activesense_core::episode::{EpisodeConfig, EpisodeState, Observation};
 use activesense_core::geometry::{v2, Vec2};
@@ -162,7 +170,7 @@ impl SimWorld {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plans;
+    use crate::world::plans;
 
     #[test]
     fn agent_inside_disc_and_room() {

@@ -30,7 +30,7 @@
 //!   Then `E_o[H(x_{t+1})] = H(o, x) − H(o)` (eq. 14) and EEM takes the bearing with the
 //!   smallest value (ties: fewer rotations, then the lower bearing).
 
-use crate::sensor::SensorModel;
+use crate::world::sensor::SensorModel;
 use activesense_core::agents::{Action, ActionCosts};
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::geometry::{unit, Vec2};
@@ -482,7 +482,10 @@ mod tests {
         rot_bins: u8,
         measurements: usize,
     ) -> (FloorPlan, Pose2, Box<EpisodeRunner>, EpisodeSpec) {
-        let mut spec = EpisodeSpec::new(crate::plans::TEST_SEEDS.start + 3, AgentKind::Heuristic1);
+        let mut spec = EpisodeSpec::new(
+            crate::world::plans::TEST_SEEDS.start + 3,
+            AgentKind::Heuristic1,
+        );
         spec.rot_bins = rot_bins;
         let mut runner = Box::new(EpisodeRunner::new_empty());
         let (plan, mut world, _) = start_episode(&spec, &mut runner);

@@ -4,7 +4,7 @@
 //! format is plain XML and the picture has a dozen element kinds.
 
 use crate::episode::Trajectory;
-use crate::sensor::RangeKind;
+use crate::world::sensor::RangeKind;
 use crate::world::Placement;
 use activesense_core::geometry::{unit, v2, Vec2};
 use activesense_core::{FloorPlan, Pose2};
@@ -202,8 +202,8 @@ fn xml(t: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plans;
     use crate::world::placement;
+    use crate::world::plans;
 
     #[test]
     fn renders_well_formed_svg() {

@@ -2,10 +2,12 @@
 //! the device's action requests ([`SimInstrument`]), the in-memory [`Pipe`] and the
 //! `loopback` device thread (the core [`Session`] on the host), a std serve loop for any
 //! `Read + Write` ([`serve_std`], used by loopback and the pty test), and the QEMU launcher
-//! ([`Qemu`]) that runs the real firmware ELF with USART1 on a local TCP socket.
+//! ([`Qemu`]) that runs the real firmware ELF with USART1 on a local TCP socket (its command
+//! line comes from [`crate::link::qemu_cmd`]). The protocol client is [`crate::link::serial`].
 
 use crate::episode::EpisodeSpec;
-use crate::link::{LinkError, LinkResult};
+use crate::link::error::{LinkError, LinkResult};
+use crate::link::qemu_cmd::{qemu_command, QemuSerial};
 use crate::world::SimWorld;
 use activesense_core::agents::Action;
 use activesense_core::episode::Observation;
@@ -19,7 +21,7 @@ use std::collections::VecDeque;
 use std::convert::Infallible;
 use std::io::{self, Read, Write};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Stdio};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -289,20 +291,7 @@ impl Qemu {
         }
         let listener = std::net::TcpListener::bind("127.0.0.1:0")?;
         let port = listener.local_addr()?.port();
-        let mut child = Command::new(qemu_binary())
-            .args([
-                "-M",
-                "netduinoplus2",
-                "-nographic",
-                "-monitor",
-                "none",
-                "-semihosting-config",
-                "enable=on,target=native",
-                "-serial",
-                &format!("tcp:127.0.0.1:{port},nodelay=on"),
-                "-kernel",
-            ])
-            .arg(elf)
+        let mut child = qemu_command(&qemu_binary(), elf, QemuSerial::Tcp(port))
             .args(extra)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())

@@ -12,8 +12,8 @@
 //! `(plan_seed, episode_seed)` by SplitMix64, so changing the agent never changes the room or
 //! the noise it meets.
 
-use crate::plans;
-use crate::sensor::{RangeKind, SensorModel};
+use crate::world::plans;
+use crate::world::sensor::{RangeKind, SensorModel};
 use crate::world::{Placement, SimWorld};
 use activesense_core::agents::{Action, AgentKind, BaselineAgent};
 use activesense_core::episode::{EpisodeConfig, EpisodeParams, EpisodeState};
@@ -45,9 +45,9 @@ pub struct EpisodeSpec {
     pub termination: Termination,
     /// The user's room (`--plan`, `--plans-from`, `docs/PLANS.md`); `None`: the generated
     /// plan `plan_seed`. With a user room, `plan_seed` only feeds the seed derivation
-    /// ([`crate::planfile::NamedPlan::seed`]).
+    /// ([`crate::world::planfile::NamedPlan::seed`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub user_plan: Option<crate::planfile::NamedPlan>,
+    pub user_plan: Option<crate::world::planfile::NamedPlan>,
 }
 
 impl EpisodeSpec {
@@ -111,7 +111,10 @@ impl EpisodeSpec {
     }
 }
 
-/// SplitMix64 finaliser: decorrelates nearby seeds.
+/// SplitMix64 finaliser: decorrelates nearby seeds. The host's one copy (the trainer uses
+/// it too); the core has the same finaliser privately in `pipeline.rs`
+/// (`registration_seed`). When the core exports a public `splitmix64`, this function
+/// goes and its callers use the core's.
 pub fn splitmix64(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);

@@ -1,0 +1,288 @@
+//! `activesense episode`: run one simulated episode with a baseline or the learnt agent and
+//! print its step log and outcome; optionally write the trajectory as JSON and an SVG.
+
+use super::{write_file, SensorArgs};
+use crate::episode::{
+    parse_agent, parse_observability, parse_stop_risk, parse_termination, scan_string, EpisodeSpec,
+    Trajectory,
+};
+use crate::learn::agent::{run_agent_episode, Policies};
+use crate::plot::svg::{self, Scene};
+use crate::world::planfile::{self, PlanReadArgs};
+use activesense_core::agents::AgentKind;
+use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
+use anyhow::{bail, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct EpisodeArgs {
+    /// Plan seed (u32).
+    #[arg(long, required_unless_present = "plan", conflicts_with = "plan")]
+    seed: Option<u32>,
+    /// Play the episode in the room of this plan file instead of a generated plan (JSON,
+    /// GeoJSON or DXF; docs/PLANS.md).
+    #[arg(long)]
+    plan: Option<PathBuf>,
+    #[command(flatten)]
+    read: PlanReadArgs,
+    /// Stop only once the readings determine the pose: the smallest eigenvalue of their
+    /// normalised information matrix at the belief argmax must reach this (0 = off; the
+    /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
+    min_observability: f32,
+    /// With --termination confident: stop only once the estimated probability that the
+    /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
+    /// 'Calibrated stop'). The instrument applies the same rule.
+    #[arg(long, default_value_t = activesense_core::pipeline::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    stop_risk: f32,
+    /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
+    /// learnt, learnt-int8, or the greedy benchmarks oigm, oigm-cost, eem (docs/BENCHMARKS.md).
+    #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
+    agent: AgentKind,
+    /// Policy file for the learnt agent (default: the committed policies/k{K}/policy.policy).
+    #[arg(long)]
+    policy: Option<PathBuf>,
+    /// int8 blob for learnt-int8 (default: the one built into the firmware for this K).
+    #[arg(long)]
+    int8: Option<PathBuf>,
+    /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=10))]
+    rot_bins: u8,
+    /// Action limit (100 for evaluation, 500 for training).
+    #[arg(long, default_value_t = EVAL_MAX_ACTIONS, value_parser = clap::value_parser!(u16).range(1..))]
+    max_actions: u16,
+    /// Rotation steps per full turn (rotation step = 360° / this).
+    #[arg(long, default_value_t = DEFAULT_STEPS_PER_TURN, value_parser = clap::value_parser!(u16).range(2..=3600))]
+    steps_per_turn: u16,
+    /// Episode seed (placement, noise and agent randomness).
+    #[arg(long, default_value_t = 0)]
+    episode_seed: u64,
+    #[command(flatten)]
+    sensor: SensorArgs,
+    /// When to stop: on coarse success against the ground truth (paper), by the calibrated
+    /// stop (no ground truth; answers with the refined pose), or only at the action limit.
+    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    termination: crate::episode::Termination,
+    /// Write the full trajectory as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write an SVG of the room, agent and measurement beams here.
+    #[arg(long)]
+    svg: Option<PathBuf>,
+    /// Print only the summary, not every step.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// Runs one episode and prints its log (or, with `--quiet`, its summary) and outcome.
+pub fn run(a: EpisodeArgs) -> Result<()> {
+    let spec = spec_of(&a)?;
+    let (policies, t) = play(&a, &spec)?;
+    print_log(&spec, &t, &policies, a.quiet);
+    print_outcome(&t);
+    write_outputs(&a, &spec, &t)
+}
+
+/// The episode the options describe (a generated plan or the user's room).
+fn spec_of(a: &EpisodeArgs) -> Result<EpisodeSpec> {
+    if a.rot_bins != 1 && a.rot_bins != 10 {
+        bail!(
+            "--rot-bins must be 1 or 10 (the paper's two settings), got {}",
+            a.rot_bins
+        );
+    }
+    let user_plan = match &a.plan {
+        Some(p) => {
+            let rooms = planfile::rooms_for_command(Some(p), &[], &a.read)?;
+            rooms.and_then(|(mut r, _)| r.pop())
+        }
+        None => None,
+    };
+    Ok(EpisodeSpec {
+        plan_seed: match &user_plan {
+            Some(p) => p.seed(),
+            None => a.seed.unwrap_or_default(),
+        },
+        user_plan,
+        episode_seed: a.episode_seed,
+        agent: a.agent,
+        rot_bins: a.rot_bins,
+        config: EpisodeConfig {
+            steps_per_turn: a.steps_per_turn,
+            max_actions: a.max_actions,
+            min_observability: a.min_observability,
+            stop_risk: a.stop_risk,
+            ..Default::default()
+        },
+        sensor: a.sensor.model()?,
+        termination: a.termination,
+    })
+}
+
+/// Loads the policy the agent needs and plays the episode.
+fn play(a: &EpisodeArgs, spec: &EpisodeSpec) -> Result<(Policies, Trajectory)> {
+    let mut policies = Policies::default();
+    match spec.agent {
+        AgentKind::Learnt => policies = Policies::load(a.policy.as_slice(), &[spec.rot_bins])?,
+        AgentKind::LearntInt8 => policies.load_int8(a.int8.as_slice(), &[spec.rot_bins])?,
+        _ => {}
+    }
+    // The learnt float policy's episodes carry the inspection data (`activesense inspect`).
+    let t = match policies.for_rot_bins(spec.rot_bins) {
+        Some(p) if spec.agent == AgentKind::Learnt => crate::inspect::record_episode(spec, p),
+        _ => run_agent_episode(spec, &policies)?,
+    };
+    Ok((policies, t))
+}
+
+/// The policies used, the episode's header and truth, and (unless `quiet`) every step.
+fn print_log(spec: &EpisodeSpec, t: &Trajectory, policies: &Policies, quiet: bool) {
+    for p in policies.iter() {
+        println!("policy: {}", p.path.display());
+    }
+    for p in policies.int8() {
+        println!("policy: {}", p.describe());
+    }
+    println!(
+        "episode: {} agent {} rot-bins {} max-actions {} episode-seed {}",
+        spec.plan_label(),
+        spec.agent.name(),
+        spec.rot_bins,
+        spec.config.max_actions,
+        spec.episode_seed
+    );
+    println!(
+        "truth: agent ({:.3}, {:.3}) heading {:.1}° (hidden from the agent)",
+        t.truth.x,
+        t.truth.y,
+        t.truth.theta.to_degrees()
+    );
+    if !quiet {
+        println!("step  action        bearing  range       scan (left..right)    cost   entropy");
+        println!(
+            "   -  start         {:7.1}°  {:<10}  {}",
+            0.0,
+            "",
+            scan_string(t.initial_scan)
+        );
+        for s in &t.steps {
+            let range = match (s.range, s.action) {
+                (Some(r), _) => format!("{r:8.3} m"),
+                (None, activesense_core::agents::Action::Measure) => "no return".into(),
+                _ => String::new(),
+            };
+            println!(
+                "{:4}  {:<12}  {:7.1}°  {:<10}  {}  {:.3}  {:.2}",
+                s.step,
+                s.action.name(),
+                s.bearing.to_degrees(),
+                range,
+                scan_string(s.scan),
+                s.cost,
+                s.entropy
+            );
+        }
+    }
+}
+
+/// How the episode ended: recognition, coarse and refined estimates, the stop's risk.
+fn print_outcome(t: &Trajectory) {
+    println!(
+        "end: {:?} after {} actions ({} measurements, {} rotations), cost {:.3}",
+        t.end, t.summary.actions, t.summary.measurements, t.summary.rotations, t.summary.cost
+    );
+    let o = &t.outcome;
+    let fmt_pose = |p: &activesense_core::Pose2| {
+        format!(
+            "({:.3}, {:.3}) heading {:.1}°",
+            p.x,
+            p.y,
+            p.theta.to_degrees()
+        )
+    };
+    // Under the calibrated stop the answer is the refined pose, scored by its cell.
+    let answer_is_refined =
+        t.spec.termination == crate::episode::Termination::Confident && o.refined.is_some();
+    println!(
+        "recognised: {} (room symmetry C{}{})",
+        if o.recognised { "yes" } else { "no" },
+        o.symmetry_order,
+        if answer_is_refined {
+            "; scored on the cell the refined pose lies in"
+        } else {
+            ""
+        }
+    );
+    if let (Some(c), Some(e)) = (o.coarse, o.coarse_error) {
+        let what = if answer_is_refined {
+            "coarse estimate (the refined pose's cell):"
+        } else {
+            "coarse estimate:"
+        };
+        println!("{what}  {}  error {:.3} m", fmt_pose(&c), e);
+    }
+    match (&o.refined, o.pose_error) {
+        (Some(r), Some(e)) => println!(
+            "refined estimate: {}  error {:.4} m (registration rms {:.4} m, {} inliers)",
+            fmt_pose(&r.pose),
+            e,
+            r.error,
+            r.inliers
+        ),
+        _ => println!(
+            "refined estimate: none ({})",
+            o.registration_note.as_deref().unwrap_or("not registered")
+        ),
+    }
+    match o.stop_risk {
+        Some(r) => println!(
+            "estimated risk of a wrong registration: {:.2} % (the confident stop stops below {:.2} %)",
+            100.0 * r,
+            100.0 * t.spec.config.stop_risk
+        ),
+        None => println!(
+            "estimated risk of a wrong registration: not available (belief peak mass below {}, fewer readings than unknowns, or no registration)",
+            activesense_core::stop::GATE_PEAK_MASS
+        ),
+    }
+    let readings = t.steps.iter().filter(|s| s.range.is_some()).count();
+    if (o.answer_readings as usize) < readings {
+        println!(
+            "answer from the lowest-risk moment, after reading {} of {}: the action limit came before a confident stop",
+            o.answer_readings, readings
+        );
+    }
+}
+
+/// The trajectory JSON (`--json`) and the episode picture (`--svg`).
+fn write_outputs(a: &EpisodeArgs, spec: &EpisodeSpec, t: &Trajectory) -> Result<()> {
+    let o = &t.outcome;
+    if let Some(path) = &a.json {
+        // The inspection arrays (K × 900 floats per step) are written compactly.
+        let text = if t.inspection.is_some() {
+            serde_json::to_string(t)?
+        } else {
+            serde_json::to_string_pretty(t)?
+        };
+        write_file(path, &text)?;
+        println!("wrote {}", path.display());
+    }
+    if let Some(path) = &a.svg {
+        let scene = Scene {
+            title: format!(
+                "{} — {} episode, {} measurements",
+                spec.plan_label(),
+                spec.agent.name(),
+                t.summary.measurements
+            ),
+            placement: Some(t.placement),
+            agent: Some(t.truth),
+            trajectory: Some(t),
+            estimate: o.refined.map(|r| r.pose),
+        };
+        write_file(path, &svg::render(&t.plan, &scene))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}

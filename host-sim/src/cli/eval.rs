@@ -1,0 +1,224 @@
+//! `activesense eval`: evaluate agents on the test plans or the user's plans (the paper's
+//! Table 4) and write results.json, results.md, timing.json and the charts; or, with
+//! `--extra-measurements`, the pose error past the minimal set.
+
+use super::{command_line, SensorArgs};
+use crate::episode::{parse_agent, parse_observability, parse_stop_risk, parse_termination};
+use crate::learn::agent::Policies;
+use crate::world::planfile::{self, PlanReadArgs};
+use crate::world::plans;
+use activesense_core::agents::AgentKind;
+use activesense_core::episode::{EpisodeConfig, EVAL_MAX_ACTIONS};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct EvalArgs {
+    /// Comma-separated agent names (blind-0..2, heuristic-0..3, learnt, learnt-int8, and the
+    /// greedy benchmarks oigm, oigm-cost, eem), or
+    /// "all" for the learnt policy (float and int8) and the seven Table-3 baselines.
+    #[arg(long, default_value = "all", value_parser = parse_agents)]
+    agents: AgentList,
+    /// Learnt policy file(s), each used for the K its header names (repeat for K = 1 and
+    /// 10); default: the committed policies/k{K}/policy.policy.
+    #[arg(long)]
+    policy: Vec<PathBuf>,
+    /// int8 policy blob(s) for learnt-int8, each used for the K its header names;
+    /// default: the blobs built into the firmware (policies/k{K}/policy.q8).
+    #[arg(long)]
+    int8: Vec<PathBuf>,
+    /// Comma-separated rotation settings: 1 (heading known) and/or 10.
+    #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
+    rot_bins: Vec<u8>,
+    /// Number of test plans (generated; see --plan / --plans-from for your own).
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
+    plans: u32,
+    /// Evaluate in the room of this plan file instead of the test plans (JSON, GeoJSON or
+    /// DXF; docs/PLANS.md).
+    #[arg(long)]
+    plan: Option<PathBuf>,
+    /// Evaluate in every room of these plan files and directories (.json, .geojson, .dxf;
+    /// refused files are listed and skipped).
+    #[arg(long, num_args = 1..)]
+    plans_from: Vec<PathBuf>,
+    #[command(flatten)]
+    read: PlanReadArgs,
+    /// First plan seed (the test set is 1000000..1001000).
+    #[arg(long, default_value_t = plans::TEST_SEEDS.start)]
+    first_seed: u32,
+    /// Episode seed (placement and noise also depend on the plan seed).
+    #[arg(long, default_value_t = 0)]
+    episode_seed: u64,
+    /// Action limit per episode.
+    #[arg(long, default_value_t = EVAL_MAX_ACTIONS, value_parser = clap::value_parser!(u16).range(1..))]
+    max_actions: u16,
+    /// When an episode stops: coarse success against the ground truth (the paper), or the
+    /// calibrated stop (no ground truth; it answers with the refined pose, and recognition
+    /// scores the cell that pose lies in), or only the action limit.
+    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    termination: crate::episode::Termination,
+    #[command(flatten)]
+    sensor: SensorArgs,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Do not draw a progress bar.
+    #[arg(long)]
+    no_progress: bool,
+    /// The pose-error-vs-cost curve (utility-k{K}.svg) registers after every measurement of
+    /// the first N plans (the entropy and recognition curves use all plans).
+    #[arg(long, default_value_t = 200)]
+    curve_plans: u32,
+    /// Instead of Table 4: follow every episode past the point where the oracle rule would
+    /// stop it for N more ranges, registering after each (writes extra.json, extra.md and
+    /// extra.svg; episodes run to --max-actions, so give room, e.g. --max-actions 300).
+    #[arg(long)]
+    extra_measurements: Option<usize>,
+    /// Stop only once the readings determine the pose: the smallest eigenvalue of their
+    /// normalised information matrix at the belief argmax must reach this (0 = off; the
+    /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
+    min_observability: f32,
+    /// With --termination confident: stop only once the estimated probability that the
+    /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
+    /// 'Calibrated stop'). The instrument applies the same rule.
+    #[arg(long, default_value_t = activesense_core::pipeline::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    stop_risk: f32,
+}
+
+#[derive(Clone)]
+struct AgentList(Vec<AgentKind>);
+
+fn parse_agents(s: &str) -> Result<AgentList, String> {
+    if s == "all" {
+        let mut all = AgentKind::ALL.to_vec();
+        all.insert(0, AgentKind::LearntInt8);
+        all.insert(0, AgentKind::Learnt);
+        return Ok(AgentList(all));
+    }
+    let mut v = Vec::new();
+    for name in s.split(',').map(str::trim).filter(|n| !n.is_empty()) {
+        let a = parse_agent(name)?;
+        if !v.contains(&a) {
+            v.push(a);
+        }
+    }
+    if v.is_empty() {
+        return Err("no agent given".into());
+    }
+    Ok(AgentList(v))
+}
+
+pub fn run(a: EvalArgs) -> Result<()> {
+    use crate::eval::{experiments, harness, report};
+    use std::io::IsTerminal;
+    if let Some(bad) = a.rot_bins.iter().find(|k| **k != 1 && **k != 10) {
+        bail!("--rot-bins takes 1 and/or 10 (the paper's two settings), got {bad}");
+    }
+    let mut rot_bins = a.rot_bins.clone();
+    rot_bins.dedup();
+    super::set_threads(a.threads)?;
+    let rooms = planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
+    let (user_plans, refused) = rooms.unwrap_or_default();
+    let opts = harness::EvalOptions {
+        agents: a.agents.0.clone(),
+        rot_bins,
+        plans: if user_plans.is_empty() {
+            a.plans
+        } else {
+            user_plans.len() as u32
+        },
+        user_plans,
+        refused_plans: refused.iter().map(|e| e.to_string()).collect(),
+        first_seed: a.first_seed,
+        episode_seed: a.episode_seed,
+        config: EpisodeConfig {
+            max_actions: a.max_actions,
+            min_observability: a.min_observability,
+            stop_risk: a.stop_risk,
+            ..Default::default()
+        },
+        sensor: a.sensor.model()?,
+        termination: a.termination,
+        policy_files: Vec::new(),
+        policies: Policies::default(),
+        progress: !a.no_progress && std::io::stderr().is_terminal(),
+        curve_plans: a.curve_plans,
+    };
+    let mut opts = opts;
+    if opts.agents.contains(&AgentKind::Learnt) {
+        opts.policies = Policies::load(&a.policy, &opts.rot_bins)?;
+    } else if !a.policy.is_empty() {
+        bail!("--policy given but the learnt agent is not among --agents");
+    }
+    if opts.agents.contains(&AgentKind::LearntInt8) {
+        opts.policies.load_int8(&a.int8, &opts.rot_bins)?;
+    } else if !a.int8.is_empty() {
+        bail!("--int8 given but the learnt-int8 agent is not among --agents");
+    }
+    opts.policy_files = opts
+        .policies
+        .iter()
+        .map(|p| p.describe())
+        .chain(opts.policies.int8().map(|p| p.describe()))
+        .collect();
+    let command = command_line();
+    if let Some(extra) = a.extra_measurements {
+        eprintln!(
+            "following {} agent(s) x {} rotation setting(s) x {} plans for {extra} ranges past the minimal set",
+            opts.agents.len(),
+            opts.rot_bins.len(),
+            opts.plans
+        );
+        let t0 = std::time::Instant::now();
+        let report = experiments::extra_measurements(&opts, extra);
+        std::fs::create_dir_all(&a.out)
+            .with_context(|| format!("cannot create {}", a.out.display()))?;
+        let md = experiments::extra_markdown(&report, &command);
+        for (name, body) in [
+            ("extra.json", serde_json::to_string_pretty(&report)? + "\n"),
+            ("extra.md", md.clone()),
+            ("extra.svg", experiments::extra_svg(&report)),
+        ] {
+            let p = a.out.join(name);
+            std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
+            println!("wrote {}", p.display());
+        }
+        print!("{md}");
+        println!("{:.1} s wall time", t0.elapsed().as_secs_f64());
+        return Ok(());
+    }
+    eprintln!(
+        "evaluating {} agent(s) x {} rotation setting(s) x {} plans = {} episodes",
+        opts.agents.len(),
+        opts.rot_bins.len(),
+        opts.plans,
+        opts.agents.len() * opts.rot_bins.len() * opts.plans as usize
+    );
+    let (report, timing) = harness::run(&opts);
+    let files = report::write_outputs(&report, &timing, &a.out, &command)?;
+    println!("agent         bins  recognition  pose error (m)  measurements  rotations   cost");
+    for r in &report.results {
+        println!(
+            "{:<12}  {:>4}  {:>11.3}  {:>14}  {:>12.2}  {:>9.2}  {:.3}",
+            r.agent,
+            r.rot_bins,
+            r.recognition_rate,
+            r.pose_error
+                .map(|e| format!("{e:.4}"))
+                .unwrap_or_else(|| "-".into()),
+            r.measurements,
+            r.rotations,
+            r.cost
+        );
+    }
+    println!("{:.1} s wall time", timing.total_s);
+    for f in files {
+        println!("wrote {}", f.display());
+    }
+    Ok(())
+}

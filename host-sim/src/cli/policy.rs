@@ -1,0 +1,223 @@
+//! `activesense policy …`: post-training int8 quantisation of a float policy (`quantize`),
+//! float-vs-int8 agreement on the test plans (`agreement`), and, over a link to an
+//! instrument, uploading an int8 policy (`upload`) and asking which one serves (`info`).
+
+use super::write_file;
+use crate::learn::agent::Policies;
+use crate::link::serial::{self, LinkSpec};
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+#[derive(Args)]
+pub struct QuantizeArgs {
+    /// Float policy file (activesense train output).
+    #[arg(long)]
+    policy: PathBuf,
+    /// Where to write the int8 blob.
+    #[arg(long)]
+    out: PathBuf,
+    /// Greedy episodes on training plans whose states calibrate the activation ranges.
+    #[arg(long, default_value_t = crate::learn::quantize::DEFAULT_CALIBRATION_EPISODES)]
+    calibration_episodes: usize,
+    /// Seed of the calibration plans and placements.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+#[derive(Args)]
+pub struct AgreementArgs {
+    /// Comma-separated rotation settings.
+    #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
+    rot_bins: Vec<u8>,
+    /// Test plans per setting (seeds from 1000000 on).
+    #[arg(long, default_value_t = 200)]
+    plans: usize,
+    /// Float policy file(s), each for the K its header names; default: the committed
+    /// policies/k{K}/policy.policy.
+    #[arg(long)]
+    policy: Vec<PathBuf>,
+    /// int8 blob(s) to check, each for the K it names; default: quantised on the fly.
+    #[arg(long)]
+    int8: Vec<PathBuf>,
+    /// Calibration episodes when quantising on the fly.
+    #[arg(long, default_value_t = crate::learn::quantize::DEFAULT_CALIBRATION_EPISODES)]
+    calibration_episodes: usize,
+    /// Calibration seed when quantising on the fly.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Write the report as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+pub fn quantize(a: QuantizeArgs) -> Result<()> {
+    use crate::learn::{file, quantize};
+    let (net, meta) = file::load(&a.policy).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mask = crate::learn::agent::InputMask::of_metadata(&meta);
+    if mask != crate::learn::agent::InputMask::Full {
+        bail!(
+            "{} is an ablation trained on '{}' inputs; the instrument's int8 policy shows the network every input, so only full-input policies can be quantised",
+            a.policy.display(),
+            mask.name()
+        );
+    }
+    let (blob, r) = quantize::quantize_calibrated(&net, a.calibration_episodes, a.seed);
+    std::fs::write(&a.out, &blob).with_context(|| format!("cannot write {}", a.out.display()))?;
+    println!(
+        "calibrated on {} states of {} training episodes (seed {}); wrote {} ({} bytes, K = {})",
+        r.states,
+        a.calibration_episodes,
+        a.seed,
+        a.out.display(),
+        blob.len(),
+        net.shape.rot_bins
+    );
+    Ok(())
+}
+
+/// Reads an int8 blob, naming the file in every error.
+fn read_blob(path: &Path) -> Result<(u8, Vec<u8>)> {
+    use activesense_core::quantized::QuantizedPolicy;
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read '{}'", path.display()))?;
+    let k = QuantizedPolicy::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("'{}' is not a usable int8 policy blob: {e}", path.display()))?
+        .rot_bins();
+    Ok((k, bytes))
+}
+
+pub fn agreement(a: AgreementArgs) -> Result<()> {
+    use crate::learn::quantize;
+    let mut rot_bins = a.rot_bins.clone();
+    rot_bins.dedup();
+    let policies = Policies::load(&a.policy, &rot_bins)?;
+    let mut blobs = Vec::new();
+    for path in &a.int8 {
+        blobs.push((read_blob(path)?, path.clone()));
+    }
+    let mut reports = Vec::new();
+    println!("| K | plans | states | action agreement | identical episodes | success float / int8 | mean actions float / int8 | max logit error | blob |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for &k in &rot_bins {
+        let p = policies
+            .for_rot_bins(k)
+            .ok_or_else(|| anyhow::anyhow!("no float policy for K = {k}"))?;
+        let blob = match blobs.iter().find(|((bk, _), _)| *bk == k) {
+            Some(((_, b), _)) => b.clone(),
+            None => quantize::quantize_calibrated(&p.net, a.calibration_episodes, a.seed).0,
+        };
+        let r = quantize::agreement(&p.net, &blob, a.plans).map_err(|e| {
+            anyhow::anyhow!("int8 blob for K = {k} does not fit {}: {e}", p.describe())
+        })?;
+        println!(
+            "| {} | {} | {} | {:.4} | {} / {} | {:.3} / {:.3} | {:.1} / {:.1} | {:.4} | {} B, crc {:08x} |",
+            r.rot_bins,
+            r.plans,
+            r.states,
+            r.action_agreement,
+            r.identical_episodes,
+            r.plans,
+            r.float.success_rate,
+            r.int8.success_rate,
+            r.float.mean_actions,
+            r.int8.mean_actions,
+            r.max_logit_error,
+            r.blob_bytes,
+            r.blob_crc
+        );
+        reports.push(serde_json::json!({ "policy": p.describe(), "agreement": r }));
+    }
+    if let Some(path) = &a.json {
+        write_file(path, &serde_json::to_string_pretty(&reports)?)?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// `activesense policy upload`.
+#[derive(Args, Debug)]
+pub struct PolicyUploadArgs {
+    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
+    #[arg(long)]
+    pub link: LinkSpec,
+    /// The int8 policy blob (`activesense policy quantize` output).
+    #[arg(long)]
+    pub int8: PathBuf,
+    /// Reply timeout in milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+}
+
+/// `activesense policy info`.
+#[derive(Args, Debug)]
+pub struct PolicyInfoArgs {
+    /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
+    #[arg(long)]
+    pub link: LinkSpec,
+    /// Reply timeout in milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+}
+
+fn print_policy(i: &activesense_core::wire::PolicyInfo) {
+    println!(
+        "K = {:>2}: {:?}{}",
+        i.rot_bins,
+        i.source,
+        if i.len > 0 {
+            format!(" ({} bytes, crc {:08x})", i.len, i.crc)
+        } else {
+            String::new()
+        }
+    );
+}
+
+/// Uploads an int8 policy into the instrument's RAM slot (it serves its K until power-off
+/// or `Reset`; the built-in policy serves again after that). The device refuses a blob
+/// that is corrupt or for another K and keeps the policy it had.
+pub fn upload(a: PolicyUploadArgs) -> Result<()> {
+    let blob = std::fs::read(&a.int8)
+        .with_context(|| format!("cannot read int8 policy '{}'", a.int8.display()))?;
+    // Check locally first: a clear message beats a device error code.
+    let k = activesense_core::quantized::QuantizedPolicy::parse(&blob)
+        .map_err(|e| {
+            anyhow::anyhow!(
+                "'{}' is not a usable int8 policy blob: {e}",
+                a.int8.display()
+            )
+        })?
+        .rot_bins();
+    let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
+        .with_context(|| format!("opening {:?}", a.link))?;
+    let info = link.client.hello().context("handshake")?;
+    if info.capabilities & activesense_core::wire::CAP_POLICY_UPLOAD == 0 {
+        bail!(
+            "the device ({}) does not accept policy uploads",
+            info.firmware
+        );
+    }
+    let bar = indicatif::ProgressBar::new(blob.len() as u64);
+    let installed = link
+        .client
+        .upload_policy(k, &blob, |n| bar.set_position(n as u64))
+        .with_context(|| format!("uploading '{}'", a.int8.display()))?;
+    bar.finish_and_clear();
+    println!("uploaded {} ({} bytes)", a.int8.display(), blob.len());
+    print_policy(&installed);
+    link.close().context("closing the link")?;
+    Ok(())
+}
+
+/// Prints which policy serves K = 1 and K = 10 on the instrument.
+pub fn info(a: PolicyInfoArgs) -> Result<()> {
+    let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
+        .with_context(|| format!("opening {:?}", a.link))?;
+    let info = link.client.hello().context("handshake")?;
+    println!("device: {} (protocol v{})", info.firmware, info.protocol);
+    for k in [1u8, 10] {
+        print_policy(&link.client.policy_info(k)?);
+    }
+    link.close().context("closing the link")?;
+    Ok(())
+}

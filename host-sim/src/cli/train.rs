@@ -1,0 +1,95 @@
+//! `activesense train`: train the learnt sampling policy (advantage actor-critic, paper §3.1)
+//! and write the policy file, its learning curve and logs.
+
+use super::command_line;
+use anyhow::{bail, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct TrainArgs {
+    // Every hyper-parameter flag (--rot-bins, --updates, --seed, --envs, ...): their
+    // defaults and help are written once, in HyperParams.
+    #[command(flatten)]
+    hp: crate::learn::train::HyperParams,
+    /// Stop after this many minutes of wall time even if --updates is not reached (the
+    /// result then depends on the machine's speed; --updates alone is reproducible).
+    #[arg(long)]
+    minutes: Option<f64>,
+    /// Start from this policy file instead of a fresh network (fine-tuning, resuming from
+    /// DIR/checkpoint.policy).
+    #[arg(long)]
+    init: Option<PathBuf>,
+    /// Worker threads (default: all cores). The weights do not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output directory: policy.policy, checkpoint.policy, log.csv, log.json, curve.svg.
+    #[arg(long)]
+    out: PathBuf,
+    /// Print a log line per --log-every updates instead of a progress bar.
+    #[arg(long)]
+    no_progress: bool,
+}
+
+pub fn run(a: TrainArgs) -> Result<()> {
+    use crate::learn::{agent::shape_for, file, train};
+    use std::io::IsTerminal;
+    if a.hp.rot_bins != 1 && a.hp.rot_bins != 10 {
+        bail!(
+            "--rot-bins must be 1 or 10 (the paper's two settings), got {}",
+            a.hp.rot_bins
+        );
+    }
+    super::set_threads(a.threads)?;
+    let hp = a.hp;
+    let init = match &a.init {
+        Some(p) => Some(file::load_expecting(p, hp.rot_bins, shape_for(hp.rot_bins).side)?.0),
+        None => None,
+    };
+    let command = command_line();
+    let shape = shape_for(hp.rot_bins);
+    eprintln!(
+        "training K = {}: network {} ({} parameters, {} multiply-accumulates per decision), {} threads",
+        hp.rot_bins,
+        crate::learn::net::ARCH_NAME,
+        shape.param_count(),
+        shape.macs(),
+        rayon::current_num_threads()
+    );
+    eprintln!("hyper-parameters:\n{}", hp.table());
+    let opts = train::RunOptions {
+        out: Some(a.out.clone()),
+        minutes: a.minutes,
+        progress: !a.no_progress && std::io::stderr().is_terminal(),
+        command,
+        init,
+    };
+    let outcome = train::train(&hp, &opts)?;
+    if let Some(last) = outcome.log.last() {
+        println!(
+            "trained {} updates ({} environment steps, {} episodes) in {:.1} min: last window return {:+.3}, recognition {:.3}, {:.2} measurements, {:.2} rotations, cost {:.3}",
+            outcome.updates,
+            last.env_steps,
+            last.episodes,
+            outcome.wall_s / 60.0,
+            last.mean_return,
+            last.recognition,
+            last.measurements,
+            last.rotations,
+            last.cost
+        );
+    }
+    for f in [
+        "policy.policy",
+        "checkpoint.policy",
+        "log.csv",
+        "log.json",
+        "curve.svg",
+    ] {
+        let p = a.out.join(f);
+        if p.exists() {
+            println!("wrote {}", p.display());
+        }
+    }
+    Ok(())
+}

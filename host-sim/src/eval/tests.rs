@@ -1,0 +1,66 @@
+//! Tests of the evaluation harness: deterministic output, consistent aggregates, the
+//! Wilson interval.
+
+use super::harness::{run, EvalOptions};
+use super::stats::wilson;
+use crate::episode::Termination;
+use crate::learn::agent::Policies;
+use crate::world::sensor::SensorModel;
+use activesense_core::agents::AgentKind;
+use activesense_core::episode::EpisodeConfig;
+
+fn small(plans: u32) -> EvalOptions {
+    EvalOptions {
+        agents: vec![AgentKind::Heuristic1, AgentKind::Blind2],
+        rot_bins: vec![1, 10],
+        plans,
+        first_seed: crate::world::plans::TEST_SEEDS.start,
+        episode_seed: 0,
+        config: EpisodeConfig::default(),
+        sensor: SensorModel::default(),
+        termination: Termination::Oracle,
+        policy_files: Vec::new(),
+        policies: Policies::default(),
+        progress: false,
+        curve_plans: 3,
+        user_plans: Vec::new(),
+        refused_plans: Vec::new(),
+    }
+}
+
+#[test]
+fn deterministic_json() {
+    let a = serde_json::to_string(&run(&small(6)).0).unwrap();
+    let b = serde_json::to_string(&run(&small(6)).0).unwrap();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn aggregates_are_consistent() {
+    let (rep, _) = run(&small(8));
+    assert_eq!(rep.results.len(), 4);
+    for r in &rep.results {
+        assert_eq!(r.plans, 8);
+        assert_eq!(r.episodes.len(), 8);
+        let rec = r.episodes.iter().filter(|e| e.recognised).count() as f64 / 8.0;
+        assert!((r.recognition_rate - rec).abs() < 1e-12);
+        assert!(
+            r.recognition_ci95[0] <= r.recognition_rate
+                && r.recognition_rate <= r.recognition_ci95[1]
+        );
+        let rel = &r.reliability;
+        assert_eq!(rel.episodes.iter().sum::<u32>(), 8);
+        assert!((0.0..=1.0).contains(&rel.ece) && (0.0..=1.0).contains(&rel.mean_stated));
+        let last = *r.recognition_by_budget.last().unwrap();
+        assert!(last <= r.recognition_rate + 1e-12);
+        assert!(r.recognition_by_budget.windows(2).all(|w| w[0] <= w[1]));
+    }
+}
+
+#[test]
+fn wilson_interval() {
+    let (lo, hi) = wilson(50, 100);
+    assert!((lo - 0.4038).abs() < 1e-3 && (hi - 0.5962).abs() < 1e-3);
+    let (lo, hi) = wilson(100, 100);
+    assert!(lo > 0.96 && hi > 0.9999 && hi <= 1.0);
+}
