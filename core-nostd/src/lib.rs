@@ -75,33 +75,3 @@ pub mod world;
 
 pub use world::floorplan::{FloorPlan, PlanError, RayHit, MAX_VERTICES};
 pub use world::geometry::{Pose2, Vec2};
-
-// TEMPORARY: old paths for host-sim until the merge. Each line maps a module that moved
-// to its new place (`/work/coord/core-path-map.md` lists every item); delete the block
-// once host-sim imports the new paths.
-#[doc(hidden)]
-pub mod agents {
-    //! TEMPORARY: old path of [`crate::episode::actions`] and [`crate::policy::baselines`].
-    pub use crate::episode::actions::*;
-    pub use crate::policy::baselines::BaselineAgent;
-}
-#[doc(hidden)]
-pub use device as session;
-#[doc(hidden)]
-pub use device::instrument;
-#[doc(hidden)]
-pub use pipeline::runner;
-#[doc(hidden)]
-pub use policy::builtin;
-#[doc(hidden)]
-pub use policy::int8 as quantized;
-#[doc(hidden)]
-pub use protocol as wire;
-#[doc(hidden)]
-pub use registration::pose_distance;
-#[doc(hidden)]
-pub use registration::refine;
-#[doc(hidden)]
-pub use stop::calibration as stop_calibration;
-#[doc(hidden)]
-pub use world::{floorplan, geometry, math, symmetry};

@@ -3,8 +3,8 @@
 //! must never panic, and every reply the device writes must itself be a valid frame.
 #![no_main]
 
-use activesense_core::session::{Session, SessionConfig};
-use activesense_core::wire::{decode_frame, Feed, FrameAccumulator, Response};
+use activesense_core::device::{Session, SessionConfig};
+use activesense_core::protocol::{decode_frame, Feed, FrameAccumulator, Response};
 use libfuzzer_sys::fuzz_target;
 
 struct Sink(Vec<u8>);
@@ -28,7 +28,7 @@ fuzz_target!(|data: &[u8]| {
         timeout_ms: 50,
         cycle_clock: None,
         // The firmware's policies: learnt-int8 episodes and uploads are fuzzed too.
-        policies: &activesense_core::builtin::POLICIES,
+        policies: &activesense_core::policy::builtin::POLICIES,
     }));
     let mut out = Sink(Vec::new());
     let chunk = 1 + (ctl as usize & 31);

@@ -5,7 +5,7 @@
 //! `cargo bench -p activesense-sim --bench localization`
 
 use activesense_core::localization::{GhtLocalizer, LocalizerConfig};
-use activesense_core::math::TAU;
+use activesense_core::world::math::TAU;
 use activesense_sim::baselines::classical::{ClassicalConfig, ClassicalLocalizer};
 use activesense_sim::world::plans;
 use activesense_sim::world::SimWorld;
@@ -26,7 +26,7 @@ fn measurements(
             let b = k as f32 * TAU / 54.0;
             plan.ray_cast(
                 t.translation(),
-                activesense_core::geometry::unit(t.theta + b),
+                activesense_core::world::geometry::unit(t.theta + b),
             )
             .filter(|h| h.incidence < 1.3)
             .map(|h| (b, h.range))

@@ -6,9 +6,9 @@
 //!
 //! `cargo bench -p activesense-sim --bench policy`
 
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
+use activesense_core::pipeline::runner::EpisodeRunner;
 use activesense_core::policy::{BELIEF_PLANE, SIDE_FEATURES};
-use activesense_core::runner::EpisodeRunner;
 use activesense_sim::episode::{run_episode, start_episode, EpisodeSpec};
 use activesense_sim::learn::agent::{features, shape_for, LearntAgent};
 use activesense_sim::learn::net::{BatchCache, PolicyNet, Scratch};

@@ -14,9 +14,10 @@
 //! cargo run --release -p activesense-sim --example stop_trace -- 300 10   # plans, rotation bins
 //! ```
 
-use activesense_core::agents::{AgentKind, BaselineAgent};
+use activesense_core::episode::AgentKind;
+use activesense_core::episode::Termination;
 use activesense_core::localization::grid::CellIndex;
-use activesense_core::pipeline::Termination;
+use activesense_core::policy::BaselineAgent;
 use activesense_core::stop::StopModel;
 use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
 use activesense_sim::world::plans::TEST_SEEDS;

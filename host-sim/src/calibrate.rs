@@ -15,7 +15,7 @@
 use crate::episode::{parse_agent, Termination};
 use crate::eval::harness::{episode_bar, EvalOptions};
 use crate::learn::agent::{run_agent_episode_observed, Policies};
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::stop::{StopFeatures, StopModel, FEATURES};
 use clap::Args;

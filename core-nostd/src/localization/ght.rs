@@ -47,7 +47,8 @@ use serde::{Deserialize, Serialize};
 
 use super::grid::{self, CellIndex, GridSpec, Mode};
 use super::rtable::RTable;
-use super::vote::{vote_layer, EntropyAcc};
+use super::vote::{vote_layer, EntropyAcc, QTAB_LEN};
+pub use super::vote::{KERNEL_LEN, KERNEL_Q_MAX, VOTE_QUANTA};
 use super::{
     Confidence, LocError, LocalizerConfig, MAX_CELLS, MAX_LAYER_CELLS, MAX_RTABLE_POINTS,
     MAX_SUB_BINS,
@@ -81,22 +82,10 @@ const _: () = assert!(
 );
 /// Heading hypotheses per bin of the coarse-to-fine re-vote ([`GhtLocalizer::refine_argmax`]).
 pub const FINE_SUB_BINS: u8 = 32;
-/// Vote quantum: a measurement adds `round(w·VOTE_QUANTA)` (`w ∈ [0, 1]`) to a slot.
-pub const VOTE_QUANTA: u8 = 16;
-
-/// Table index per unit of `q`.
-pub(super) const KERNEL_SCALE: f32 = (KERNEL_LEN - 1) as f32 / KERNEL_Q_MAX;
-
-/// Entries of the vote-kernel table (`q = 0 ..= KERNEL_Q_MAX`).
-pub const KERNEL_LEN: usize = 129;
-/// Largest `q` with a non-zero vote: `exp(−q)·Q` rounds to 0 beyond `ln(2Q)` ≈ 3.47.
-pub const KERNEL_Q_MAX: f32 = 3.5;
 /// Rebase step: when a slot would overflow, every slot drops by this many quanta and the
 /// common offset grows by it (cells that far below the peak have relative probability
 /// `≤ e^{−λ·REBASE/Q}`, `e^{−18}` at the default λ).
 const REBASE: u8 = 128;
-/// Exponent table length: differences to the reference of `0..=255 + Q` quanta.
-pub(super) const QTAB_LEN: usize = 256 + VOTE_QUANTA as usize;
 
 const _: () = assert!(MAX_SUB_BINS >= TRACKED_SUB_BINS);
 

@@ -2,12 +2,24 @@
 //! one rotation layer, and the running entropy accumulator the committed and the staged
 //! belief share. Split from [`super::ght`], which owns the state they work on.
 
-use super::ght::{KERNEL_LEN, KERNEL_SCALE, QTAB_LEN, VOTE_QUANTA};
 use super::grid::GridSpec;
 use super::rtable::RTable;
 use super::{LocalizerConfig, MAX_LAYER_CELLS};
 use crate::world::geometry::{unit, Vec2};
 use crate::world::math::{cos, ln};
+
+/// Vote quantum: a measurement adds `round(w·VOTE_QUANTA)` (`w ∈ [0, 1]`) to a slot.
+pub const VOTE_QUANTA: u8 = 16;
+
+/// Table index per unit of `q`.
+pub(crate) const KERNEL_SCALE: f32 = (KERNEL_LEN - 1) as f32 / KERNEL_Q_MAX;
+
+/// Entries of the vote-kernel table (`q = 0 ..= KERNEL_Q_MAX`).
+pub const KERNEL_LEN: usize = 129;
+/// Largest `q` with a non-zero vote: `exp(−q)·Q` rounds to 0 beyond `ln(2Q)` ≈ 3.47.
+pub const KERNEL_Q_MAX: f32 = 3.5;
+/// Exponent table length: differences to the reference of `0..=255 + Q` quanta.
+pub(crate) const QTAB_LEN: usize = 256 + VOTE_QUANTA as usize;
 
 /// Running `Z = Σq`, `S = Σ q ln q` over the interior cells in a fixed order; `H = ln Z −
 /// S/Z`. With `λ > 0`, `q = exp(−λ·k/Q)` for a cell `k` quanta below the reference (table

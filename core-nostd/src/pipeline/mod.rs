@@ -38,11 +38,7 @@ use serde::{Deserialize, Serialize};
 
 pub mod runner;
 
-// TEMPORARY: old paths for host-sim until the merge. `Termination` moved to `episode` (this
-// module uses it through this line: import it from `crate::episode` when the line goes),
-// `DEFAULT_STOP_RISK` to `limits`, `registration_seed` to `episode`.
-pub use crate::episode::{registration_seed, Termination};
-pub use crate::limits::DEFAULT_STOP_RISK;
+use crate::episode::Termination;
 
 /// Radius of the registration's trust region around the coarse estimate, in grid cells.
 /// Coarse success puts the truth within 1.5 cells per axis of the argmax cell centre, but
@@ -570,6 +566,7 @@ impl Pipeline {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::limits::DEFAULT_STOP_RISK;
     use crate::world::geometry::{unit, v2};
 
     /// An 8 × 6 m L-shaped room in the model frame (shared by the core's tests).

@@ -205,7 +205,7 @@ mod tests {
             termination: Termination::ActionLimit,
             config: EpisodeConfig {
                 min_observability: 0.0,
-                stop_risk: crate::pipeline::DEFAULT_STOP_RISK,
+                stop_risk: crate::limits::DEFAULT_STOP_RISK,
                 ..EpisodeConfig::DEFAULT
             },
         };

@@ -21,10 +21,10 @@
 //! and marginalised onto the `K` bins for the PMF. There is no motion model: the
 //! instrument only rotates in place, which moves the encoder bearing, not the pose.
 
-use activesense_core::geometry::unit;
 use activesense_core::localization::grid::{self, CellIndex, GridSpec};
 use activesense_core::localization::LocalizerConfig;
-use activesense_core::math::{exp, TAU};
+use activesense_core::world::geometry::unit;
+use activesense_core::world::math::{exp, TAU};
 use activesense_core::{FloorPlan, Pose2};
 use anyhow::{ensure, Result};
 use serde::{Deserialize, Serialize};

@@ -31,11 +31,11 @@
 //!   smallest value (ties: fewer rotations, then the lower bearing).
 
 use crate::world::sensor::SensorModel;
-use activesense_core::agents::{Action, ActionCosts};
 use activesense_core::episode::EpisodeConfig;
-use activesense_core::geometry::{unit, Vec2};
+use activesense_core::episode::{Action, ActionCosts};
 use activesense_core::localization::GhtLocalizer;
 use activesense_core::policy::{Policy, PolicyInput};
+use activesense_core::world::geometry::{unit, Vec2};
 use activesense_core::{FloorPlan, Pose2};
 use std::collections::BTreeMap;
 use std::f32::consts::TAU;
@@ -452,8 +452,8 @@ impl Policy for EemAgent {
 mod tests {
     use super::*;
     use crate::episode::{start_episode, EpisodeSpec};
-    use activesense_core::agents::AgentKind;
-    use activesense_core::runner::EpisodeRunner;
+    use activesense_core::episode::AgentKind;
+    use activesense_core::pipeline::runner::EpisodeRunner;
 
     #[test]
     fn routes_take_the_short_way() {

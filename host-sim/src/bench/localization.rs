@@ -18,9 +18,9 @@ use crate::world::plans::{self, TEST_SEEDS};
 use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::episode::EpisodeConfig;
-use activesense_core::geometry::rotate;
 use activesense_core::localization::{GhtLocalizer, LocalizerConfig};
-use activesense_core::math::TAU;
+use activesense_core::world::geometry::rotate;
+use activesense_core::world::math::TAU;
 use activesense_core::{FloorPlan, Pose2};
 use anyhow::{anyhow, Result};
 use rand::{Rng, SeedableRng};
@@ -503,18 +503,18 @@ mod tests {
     #[test]
     fn cyclic_order_of_simple_shapes() {
         let sq = FloorPlan::new(&[
-            activesense_core::geometry::v2(-2.0, -2.0),
-            activesense_core::geometry::v2(2.0, -2.0),
-            activesense_core::geometry::v2(2.0, 2.0),
-            activesense_core::geometry::v2(-2.0, 2.0),
+            activesense_core::world::geometry::v2(-2.0, -2.0),
+            activesense_core::world::geometry::v2(2.0, -2.0),
+            activesense_core::world::geometry::v2(2.0, 2.0),
+            activesense_core::world::geometry::v2(-2.0, 2.0),
         ])
         .unwrap();
         assert_eq!(cyclic_order(&sq), 4);
         let rect = FloorPlan::new(&[
-            activesense_core::geometry::v2(-3.0, -2.0),
-            activesense_core::geometry::v2(3.0, -2.0),
-            activesense_core::geometry::v2(3.0, 2.0),
-            activesense_core::geometry::v2(-3.0, 2.0),
+            activesense_core::world::geometry::v2(-3.0, -2.0),
+            activesense_core::world::geometry::v2(3.0, -2.0),
+            activesense_core::world::geometry::v2(3.0, 2.0),
+            activesense_core::world::geometry::v2(-3.0, 2.0),
         ])
         .unwrap();
         assert_eq!(cyclic_order(&rect), 2);

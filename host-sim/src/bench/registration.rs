@@ -18,12 +18,12 @@ use crate::world::plans;
 use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::episode::EpisodeConfig;
-use activesense_core::math::{wrap_angle, TAU};
-use activesense_core::pose_distance::PoseDistance;
+use activesense_core::registration::pose_distance::PoseDistance;
 use activesense_core::registration::{
     register, sparse_icp, AnnealParams, IcpParams, Measurement, Observations,
 };
-use activesense_core::symmetry::SymmetryTolerance;
+use activesense_core::world::math::{wrap_angle, TAU};
+use activesense_core::world::symmetry::SymmetryTolerance;
 use activesense_core::Pose2;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg32;

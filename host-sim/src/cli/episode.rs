@@ -9,7 +9,7 @@ use crate::episode::{
 use crate::learn::agent::{run_agent_episode, Policies};
 use crate::plot::svg::{self, Scene};
 use crate::world::planfile::{self, PlanReadArgs};
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use anyhow::{bail, Result};
 use clap::Args;
@@ -34,7 +34,7 @@ pub struct EpisodeArgs {
     /// With --termination confident: stop only once the estimated probability that the
     /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
     /// 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::pipeline::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
     stop_risk: f32,
     /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
     /// learnt, learnt-int8, or the greedy benchmarks oigm, oigm-cost, eem (docs/BENCHMARKS.md).
@@ -169,7 +169,7 @@ fn print_log(spec: &EpisodeSpec, t: &Trajectory, policies: &Policies, quiet: boo
         for s in &t.steps {
             let range = match (s.range, s.action) {
                 (Some(r), _) => format!("{r:8.3} m"),
-                (None, activesense_core::agents::Action::Measure) => "no return".into(),
+                (None, activesense_core::episode::Action::Measure) => "no return".into(),
                 _ => String::new(),
             };
             println!(

@@ -7,7 +7,7 @@ use crate::episode::{parse_agent, parse_observability, parse_stop_risk, parse_te
 use crate::learn::agent::Policies;
 use crate::world::planfile::{self, PlanReadArgs};
 use crate::world::plans;
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
 use activesense_core::episode::{EpisodeConfig, EVAL_MAX_ACTIONS};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -86,7 +86,7 @@ pub struct EvalArgs {
     /// With --termination confident: stop only once the estimated probability that the
     /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
     /// 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::pipeline::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
     stop_risk: f32,
 }
 

@@ -7,7 +7,7 @@ use crate::plot::svg::{self, Scene};
 use crate::world::placement;
 use crate::world::plans::{self, Family};
 use crate::world::sensor::SensorModel;
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use anyhow::Result;
 use clap::Args;

@@ -79,7 +79,7 @@ pub fn quantize(a: QuantizeArgs) -> Result<()> {
 
 /// Reads an int8 blob, naming the file in every error.
 fn read_blob(path: &Path) -> Result<(u8, Vec<u8>)> {
-    use activesense_core::quantized::QuantizedPolicy;
+    use activesense_core::policy::int8::QuantizedPolicy;
     let bytes = std::fs::read(path).with_context(|| format!("cannot read '{}'", path.display()))?;
     let k = QuantizedPolicy::parse(&bytes)
         .map_err(|e| anyhow::anyhow!("'{}' is not a usable int8 policy blob: {e}", path.display()))?
@@ -160,7 +160,7 @@ pub struct PolicyInfoArgs {
     pub timeout_ms: u64,
 }
 
-fn print_policy(i: &activesense_core::wire::PolicyInfo) {
+fn print_policy(i: &activesense_core::protocol::PolicyInfo) {
     println!(
         "K = {:>2}: {:?}{}",
         i.rot_bins,
@@ -180,7 +180,7 @@ pub fn upload(a: PolicyUploadArgs) -> Result<()> {
     let blob = std::fs::read(&a.int8)
         .with_context(|| format!("cannot read int8 policy '{}'", a.int8.display()))?;
     // Check locally first: a clear message beats a device error code.
-    let k = activesense_core::quantized::QuantizedPolicy::parse(&blob)
+    let k = activesense_core::policy::int8::QuantizedPolicy::parse(&blob)
         .map_err(|e| {
             anyhow::anyhow!(
                 "'{}' is not a usable int8 policy blob: {e}",
@@ -191,7 +191,7 @@ pub fn upload(a: PolicyUploadArgs) -> Result<()> {
     let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
         .with_context(|| format!("opening {:?}", a.link))?;
     let info = link.client.hello().context("handshake")?;
-    if info.capabilities & activesense_core::wire::CAP_POLICY_UPLOAD == 0 {
+    if info.capabilities & activesense_core::protocol::CAP_POLICY_UPLOAD == 0 {
         bail!(
             "the device ({}) does not accept policy uploads",
             info.firmware

@@ -15,14 +15,16 @@
 use crate::world::plans;
 use crate::world::sensor::{RangeKind, SensorModel};
 use crate::world::{Placement, SimWorld};
-use activesense_core::agents::{Action, AgentKind, BaselineAgent};
+pub use activesense_core::episode::Termination;
+use activesense_core::episode::{Action, AgentKind};
 use activesense_core::episode::{EpisodeConfig, EpisodeParams, EpisodeState};
-pub use activesense_core::pipeline::Termination;
+use activesense_core::pipeline::runner::EpisodeRunner;
 use activesense_core::pipeline::{PipelineResult, Stop};
+use activesense_core::policy::BaselineAgent;
 use activesense_core::policy::Policy;
-use activesense_core::pose_distance::PoseDistance;
+use activesense_core::registration::pose_distance::PoseDistance;
 use activesense_core::registration::Registration;
-use activesense_core::runner::EpisodeRunner;
+use activesense_core::world::math::splitmix64;
 use activesense_core::{FloorPlan, Pose2};
 use serde::{Deserialize, Serialize};
 
@@ -109,17 +111,6 @@ impl EpisodeSpec {
     pub fn agent_seed(&self) -> u64 {
         splitmix64(splitmix64(self.plan_seed as u64 ^ 0xa9e7) ^ self.episode_seed)
     }
-}
-
-/// SplitMix64 finaliser: decorrelates nearby seeds. The host's one copy (the trainer uses
-/// it too); the core has the same finaliser privately in `pipeline.rs`
-/// (`registration_seed`). When the core exports a public `splitmix64`, this function
-/// goes and its callers use the core's.
-pub fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// One recorded step.
@@ -574,7 +565,7 @@ mod tests {
             if let Some(r) = s.range {
                 let hit = t
                     .plan
-                    .ray_cast(a, activesense_core::geometry::unit(s.world_bearing))
+                    .ray_cast(a, activesense_core::world::geometry::unit(s.world_bearing))
                     .unwrap();
                 assert!((hit.range - r).abs() < 1e-3, "{} vs {r}", hit.range);
                 checked += 1;

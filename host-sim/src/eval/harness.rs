@@ -7,7 +7,7 @@ use super::stats::{aggregate, GroupResult};
 use crate::episode::{EpisodeSpec, Termination};
 use crate::learn::agent::{run_agent_episode_observed, Policies};
 use crate::world::sensor::SensorModel;
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;

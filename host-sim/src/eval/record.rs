@@ -66,7 +66,7 @@ impl EpisodeRow {
                 let mut seen = std::collections::BTreeSet::new();
                 t.steps
                     .iter()
-                    .filter(|st| st.action == activesense_core::agents::Action::Measure)
+                    .filter(|st| st.action == activesense_core::episode::Action::Measure)
                     .filter(|st| !seen.insert(st.bearing_index))
                     .count() as u16
             },

@@ -5,7 +5,7 @@
 //! ([`Reliability`]).
 
 use super::record::{curve_cost, EpisodeCurve, EpisodeRow, CURVE_POINTS, MAX_BUDGET};
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
 use serde::{Deserialize, Serialize};
 
 /// A mean with its 95 % confidence interval (normal approximation, 1.96 standard errors).

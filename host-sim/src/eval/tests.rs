@@ -6,7 +6,7 @@ use super::stats::wilson;
 use crate::episode::Termination;
 use crate::learn::agent::Policies;
 use crate::world::sensor::SensorModel;
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 
 fn small(plans: u32) -> EvalOptions {

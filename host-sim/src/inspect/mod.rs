@@ -22,7 +22,7 @@ use crate::episode::{
 };
 use crate::learn::agent::{argmax, masked_features, InputMask, LearntPolicy, ACTIONS};
 use crate::learn::net::{softmax, PolicyNet};
-use activesense_core::agents::Action;
+use activesense_core::episode::Action;
 use activesense_core::localization::grid::GridSpec;
 use activesense_core::policy::{Policy, PolicyInput, BELIEF_SIDE, SIDE_FEATURES};
 use anyhow::{bail, Context, Result};
@@ -206,7 +206,7 @@ pub struct InspectArgs {
     pub aggregate: bool,
     /// Agent of the aggregate episodes (only the learnt float policy has maps).
     #[arg(long, value_parser = crate::episode::parse_agent, default_value = "learnt")]
-    pub agent: activesense_core::agents::AgentKind,
+    pub agent: activesense_core::episode::AgentKind,
     /// Test plans of the aggregate (seeds from 1000000 on).
     #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub plans: u32,
@@ -241,7 +241,7 @@ pub fn cmd_inspect(a: InspectArgs, command: &str) -> Result<()> {
             p.display()
         );
     }
-    if a.agent != activesense_core::agents::AgentKind::Learnt {
+    if a.agent != activesense_core::episode::AgentKind::Learnt {
         bail!(
             "--aggregate needs --agent learnt (only the float policy has guided back-propagation maps), got {}",
             a.agent.name()
@@ -281,7 +281,7 @@ mod tests {
     use super::*;
     use crate::learn::agent::{default_policy_path, run_agent_episode, Policies};
     use crate::world::plans;
-    use activesense_core::agents::AgentKind;
+    use activesense_core::episode::AgentKind;
 
     fn scratch(name: &str) -> std::path::PathBuf {
         let d =

@@ -6,7 +6,7 @@
 
 use super::file::{self, LoadError};
 use super::net::{NetShape, PolicyNet, Scratch};
-use activesense_core::agents::Action;
+use activesense_core::episode::Action;
 use activesense_core::policy::{Policy, PolicyInput, BELIEF_PLANE, SIDE_FEATURES};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -234,7 +234,7 @@ pub struct Int8Policy {
 impl Int8Policy {
     /// Validates `blob` (CRC included).
     pub fn new(blob: Vec<u8>, origin: String) -> anyhow::Result<Self> {
-        let rot_bins = activesense_core::quantized::QuantizedPolicy::parse(&blob)
+        let rot_bins = activesense_core::policy::int8::QuantizedPolicy::parse(&blob)
             .map_err(|e| anyhow::anyhow!("{origin} is not a usable int8 policy blob: {e}"))?
             .rot_bins();
         Ok(Int8Policy {
@@ -256,19 +256,19 @@ impl Int8Policy {
         format!(
             "{} (crc {:08x})",
             self.origin,
-            activesense_core::quantized::stored_crc(&self.blob).unwrap_or(0)
+            activesense_core::policy::int8::stored_crc(&self.blob).unwrap_or(0)
         )
     }
 
     /// Runs `f` with an agent playing this blob.
     pub fn with_agent<R>(
         &self,
-        f: impl FnOnce(&mut activesense_core::quantized::QuantizedAgent<'_>) -> R,
+        f: impl FnOnce(&mut activesense_core::policy::int8::QuantizedAgent<'_>) -> R,
     ) -> R {
         // Validated in `new`, so parsing again cannot fail.
-        let policy = activesense_core::quantized::QuantizedPolicy::parse(&self.blob)
+        let policy = activesense_core::policy::int8::QuantizedPolicy::parse(&self.blob)
             .expect("validated blob");
-        let mut agent = Box::new(activesense_core::quantized::QuantizedAgent::new(policy));
+        let mut agent = Box::new(activesense_core::policy::int8::QuantizedAgent::new(policy));
         f(&mut agent)
     }
 }
@@ -319,7 +319,7 @@ impl Policies {
 
     /// Adds an int8 blob for every setting in `rot_bins`: from `given` files (each for the
     /// K its header names; every setting must be covered when any is given), or the blobs
-    /// built into the firmware ([`activesense_core::builtin`]).
+    /// built into the firmware ([`activesense_core::policy::builtin`]).
     pub fn load_int8(&mut self, given: &[PathBuf], rot_bins: &[u8]) -> anyhow::Result<()> {
         let mut blobs = Vec::new();
         for path in given {
@@ -331,8 +331,8 @@ impl Policies {
         }
         if given.is_empty() {
             for (k, bytes) in [
-                (1u8, activesense_core::builtin::K1),
-                (10, activesense_core::builtin::K10),
+                (1u8, activesense_core::policy::builtin::K1),
+                (10, activesense_core::policy::builtin::K10),
             ] {
                 blobs.push(Int8Policy::new(
                     bytes.to_vec(),
@@ -430,7 +430,8 @@ pub fn run_agent_episode_observed(
     policies: &Policies,
     observe: &mut dyn FnMut(crate::episode::EpisodeView<'_>),
 ) -> anyhow::Result<(crate::episode::Trajectory, DecisionTime)> {
-    use activesense_core::agents::{AgentKind, BaselineAgent};
+    use activesense_core::episode::AgentKind;
+    use activesense_core::policy::BaselineAgent;
     let mut timed = |spec: &crate::episode::EpisodeSpec, p: &mut dyn Policy| {
         let mut t = Timed {
             inner: p,

@@ -23,7 +23,7 @@
 //! wrong (wrapped with the path by [`load`]).
 
 use super::net::{NetShape, PolicyNet, ARCH_ID, ARCH_NAME, MAX_ROT_BINS};
-use activesense_core::wire::crc32;
+use activesense_core::protocol::crc32;
 use std::fmt;
 use std::path::{Path, PathBuf};
 

@@ -7,7 +7,7 @@
 //! stores it in the policy file's metadata (`hyper_params`).
 
 use super::agent::InputMask;
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
 use clap::{Args, FromArgMatches};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;

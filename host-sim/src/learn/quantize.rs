@@ -1,5 +1,5 @@
 //! Post-training quantisation of a float [`PolicyNet`] into the int8 policy blob the
-//! instrument runs (`activesense_core::quantized`, layout in `docs/policy-blob.md`), and the
+//! instrument runs (`activesense_core::policy::int8`, layout in `docs/policy-blob.md`), and the
 //! agreement check between the two.
 //!
 //! **Quantisation** (TFLite / CMSIS-NN conventions): weights symmetric per output channel
@@ -27,12 +27,12 @@ use super::net::{PolicyNet, Scratch, ARCH_ID, N_LAYERS};
 use crate::episode::{run_episode_with, EpisodeSpec, Termination, Trajectory};
 use crate::world::plans;
 use crate::world::sensor::SensorModel;
-use activesense_core::agents::{Action, AgentKind};
 use activesense_core::episode::EpisodeConfig;
-use activesense_core::policy::{Policy, PolicyInput, SIDE_FEATURES};
-use activesense_core::quantized::{
+use activesense_core::episode::{Action, AgentKind};
+use activesense_core::policy::int8::{
     self as q, LayerTensors, QuantParams, QuantizedAgent, QuantizedPolicy,
 };
+use activesense_core::policy::{Policy, PolicyInput, SIDE_FEATURES};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;

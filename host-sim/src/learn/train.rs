@@ -36,11 +36,12 @@ use crate::episode::{score, start_episode, EpisodeSpec, Termination};
 use crate::world::plans;
 use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
-use activesense_core::agents::{Action, AgentKind, BaselineAgent};
 use activesense_core::episode::EpisodeConfig;
+use activesense_core::episode::{Action, AgentKind};
+use activesense_core::pipeline::runner::EpisodeRunner;
 use activesense_core::pipeline::Stop;
+use activesense_core::policy::BaselineAgent;
 use activesense_core::policy::{Policy, BELIEF_PLANE, SIDE_FEATURES};
-use activesense_core::runner::EpisodeRunner;
 use activesense_core::{FloorPlan, Pose2};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -48,7 +49,6 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -108,7 +108,7 @@ struct Env {
 
 impl Env {
     fn new(hp: &HyperParams, index: usize) -> Self {
-        let mut rng = Pcg64::seed_from_u64(crate::episode::splitmix64(
+        let mut rng = Pcg64::seed_from_u64(activesense_core::world::math::splitmix64(
             hp.seed ^ (index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15),
         ));
         let spec = Self::draw(hp, &mut rng);

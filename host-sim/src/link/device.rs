@@ -9,11 +9,11 @@ use crate::episode::EpisodeSpec;
 use crate::link::error::{LinkError, LinkResult};
 use crate::link::qemu_cmd::{qemu_command, QemuSerial};
 use crate::world::SimWorld;
-use activesense_core::agents::Action;
+use activesense_core::device::instrument::{Instrument, Turn};
+use activesense_core::device::{Control, ServeEnd, Session, SessionConfig, DEFAULT_TIMEOUT_MS};
+use activesense_core::episode::Action;
 use activesense_core::episode::Observation;
-use activesense_core::instrument::{Instrument, Turn};
-use activesense_core::session::{Control, ServeEnd, Session, SessionConfig, DEFAULT_TIMEOUT_MS};
-use activesense_core::wire::{
+use activesense_core::protocol::{
     decode_frame, EpisodeParams, Feed, FrameAccumulator, Response, NO_ID,
 };
 use activesense_core::FloorPlan;
@@ -212,7 +212,7 @@ pub const HOST_DEVICE: SessionConfig = SessionConfig {
     firmware: concat!("host-session ", env!("CARGO_PKG_VERSION")),
     timeout_ms: DEFAULT_TIMEOUT_MS,
     cycle_clock: None,
-    policies: &activesense_core::builtin::POLICIES,
+    policies: &activesense_core::policy::builtin::POLICIES,
 };
 
 /// Serves the protocol from `session` over a std stream whose reads time out (the

@@ -2,7 +2,7 @@
 //! device, whatever the transport ([`crate::link::serial`]) or the emulator
 //! ([`crate::link::device::Qemu`]) it runs over. A leaf: it imports only the core's wire types.
 
-use activesense_core::wire::{FrameError, WireError};
+use activesense_core::protocol::{FrameError, WireError};
 use std::io;
 
 /// Everything that can go wrong talking to the device.

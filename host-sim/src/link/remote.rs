@@ -5,7 +5,7 @@
 //!
 //! The device localizes (GHT), decides when to stop and registers (sparse ICP); it reports
 //! counts, cost, the trace fingerprint, and its coarse and refined AgentPoses. `--verify`
-//! additionally replays each episode in-process ([`activesense_core::instrument::run_local`])
+//! additionally replays each episode in-process ([`activesense_core::device::instrument::run_local`])
 //! and fails unless actions, observations and report are bit-identical.
 
 use crate::episode::{
@@ -16,11 +16,11 @@ use crate::link::serial::{self, EpisodeRun, Link, LinkSpec};
 use crate::world::plans::TEST_SEEDS;
 use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
-use activesense_core::agents::AgentKind;
+use activesense_core::device::instrument::run_local;
+use activesense_core::device::Controller;
+use activesense_core::episode::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
-use activesense_core::instrument::run_local;
-use activesense_core::session::Controller;
-use activesense_core::wire::{EpisodeParams, EpisodeReport, UpdateStats};
+use activesense_core::protocol::{EpisodeParams, EpisodeReport, UpdateStats};
 use activesense_core::FloorPlan;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
@@ -49,11 +49,11 @@ pub struct RemoteEpisodeArgs {
     /// When the device stops an episode: on coarse success against the simulated ground
     /// truth (oracle, the paper's rule), when its belief is confident, or at the action limit.
     #[arg(long, value_parser = parse_termination, default_value = "oracle")]
-    pub termination: activesense_core::pipeline::Termination,
+    pub termination: activesense_core::episode::Termination,
     /// With --termination confident: stop only once the estimated probability that the
     /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
     /// 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::pipeline::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
     pub stop_risk: f32,
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax must reach this (0 = off; sent
@@ -175,7 +175,10 @@ pub fn reference_run(
     params: &EpisodeParams,
     instrument: &mut SimInstrument,
 ) -> Result<EpisodeRun> {
-    let mut ctl = Box::new(Controller::new(None, &activesense_core::builtin::POLICIES));
+    let mut ctl = Box::new(Controller::new(
+        None,
+        &activesense_core::policy::builtin::POLICIES,
+    ));
     let mut steps = Vec::new();
     let report = run_local(&mut ctl, plan, params, instrument, |a, o| {
         steps.push((a, *o))
@@ -224,8 +227,8 @@ fn pose_error(
     truth: &activesense_core::Pose2,
     r: &EpisodeReport,
 ) -> Option<(f32, &'static str)> {
-    use activesense_core::pose_distance::PoseDistance;
-    use activesense_core::symmetry::SymmetryTolerance;
+    use activesense_core::registration::pose_distance::PoseDistance;
+    use activesense_core::world::symmetry::SymmetryTolerance;
     let d = PoseDistance::new(plan, &SymmetryTolerance::default());
     match (r.refined, r.coarse) {
         (Some(p), _) => Some((d.agent_distance(&p, truth), "refined")),
@@ -506,7 +509,7 @@ pub struct McuBenchArgs {
     pub episode_seed: u64,
     /// When the device stops an episode (see `sim --termination`).
     #[arg(long, value_parser = parse_termination, default_value = "oracle")]
-    pub termination: activesense_core::pipeline::Termination,
+    pub termination: activesense_core::episode::Termination,
     /// Reply timeout in milliseconds.
     #[arg(long, default_value_t = 60_000)]
     pub timeout_ms: u64,
@@ -599,7 +602,7 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
     let mut link = serial::open_with_qemu_args(&spec, timeout, &qemu_args)
         .with_context(|| format!("starting {} in QEMU", a.elf.display()))?;
     let info = link.client.hello().context("handshake")?;
-    if info.capabilities & activesense_core::wire::CAP_CYCLE_COUNTS == 0 {
+    if info.capabilities & activesense_core::protocol::CAP_CYCLE_COUNTS == 0 {
         bail!("the firmware reports no cycle counts");
     }
     let mut rows = Vec::new();
@@ -611,7 +614,7 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
             max_actions: EVAL_MAX_ACTIONS,
             episode_seed: a.episode_seed,
             termination: a.termination,
-            stop_risk: activesense_core::pipeline::DEFAULT_STOP_RISK,
+            stop_risk: activesense_core::limits::DEFAULT_STOP_RISK,
             min_observability: 0.0,
             timeout_ms: a.timeout_ms,
             verify: false,

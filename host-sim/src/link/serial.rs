@@ -1,5 +1,5 @@
 //! Host side of the instrument serial protocol (`docs/protocol.md`): a [`Client`] that
-//! speaks [`activesense_core::wire`] over any `std::io::Read + Write`, and the transports
+//! speaks [`activesense_core::protocol`] over any `std::io::Read + Write`, and the transports
 //! (`loopback`, `tcp:HOST:PORT`, `serial:PATH[@BAUD]`, `qemu[:ELF]`) it runs over.
 //!
 //! The device decides; the host only answers its action requests. [`Client::run_episode`]
@@ -13,10 +13,10 @@
 
 use crate::link::device::{spawn_loopback, Pipe, Qemu};
 use crate::link::error::{LinkError, LinkResult};
-use activesense_core::agents::Action;
+use activesense_core::device::instrument::Instrument;
+use activesense_core::episode::Action;
 use activesense_core::episode::{Observation, SCAN_PIXELS};
-use activesense_core::instrument::Instrument;
-use activesense_core::wire::*;
+use activesense_core::protocol::*;
 use activesense_core::{FloorPlan, MAX_VERTICES};
 use heapless::Vec as HVec;
 use std::io::{Read, Write};
@@ -287,7 +287,7 @@ impl<T: Read + Write> Client<T> {
         self.expect_ack(&Request::PolicyBegin {
             rot_bins,
             len,
-            crc: activesense_core::wire::crc32(&blob[..blob.len().saturating_sub(4)]),
+            crc: activesense_core::protocol::crc32(&blob[..blob.len().saturating_sub(4)]),
         })?;
         for (i, chunk) in blob.chunks(POLICY_CHUNK).enumerate() {
             let data = heapless::Vec::from_slice(chunk)

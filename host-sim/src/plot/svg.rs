@@ -6,7 +6,7 @@
 use crate::episode::Trajectory;
 use crate::world::sensor::RangeKind;
 use crate::world::Placement;
-use activesense_core::geometry::{unit, v2, Vec2};
+use activesense_core::world::geometry::{unit, v2, Vec2};
 use activesense_core::{FloorPlan, Pose2};
 use std::fmt::Write;
 

@@ -17,10 +17,10 @@ pub mod plans;
 pub mod sensor;
 
 use crate::world::sensor::{RangeKind, SensorModel};
-use activesense_core::agents::Action;
+use activesense_core::episode::Action;
 use activesense_core::episode::{EpisodeConfig, EpisodeState, Observation};
-use activesense_core::geometry::{v2, Vec2};
-use activesense_core::math::{cos, sin, sqrt, TAU};
+use activesense_core::world::geometry::{v2, Vec2};
+use activesense_core::world::math::{cos, sin, sqrt, TAU};
 use activesense_core::{FloorPlan, Pose2};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg32;
@@ -161,7 +161,7 @@ impl SimWorld {
             Observation { range, scan },
             StepTruth {
                 range_kind: kind,
-                world_bearing: activesense_core::math::wrap_angle(self.world_bearing()),
+                world_bearing: activesense_core::world::math::wrap_angle(self.world_bearing()),
             },
         )
     }

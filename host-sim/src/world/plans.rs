@@ -18,8 +18,8 @@
 //! Only integer-derived uniform floats and `+ - * /`, `sin`/`cos` through libm are used,
 //! so the output is bit-identical across platforms.
 
-use activesense_core::geometry::{v2, Vec2};
-use activesense_core::math::{cos, sin, TAU};
+use activesense_core::world::geometry::{v2, Vec2};
+use activesense_core::world::math::{cos, sin, TAU};
 use activesense_core::FloorPlan;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg32;
@@ -180,7 +180,7 @@ fn accept(verts: &[Vec2]) -> Option<FloorPlan> {
     // the visual centre below 0.75 m (checked cheaply via the minimum edge length here and
     // precisely by the world when it places the agent).
     let min_edge = (0..plan.len())
-        .map(|i| activesense_core::geometry::length(plan.vertex(i + 1) - plan.vertex(i)))
+        .map(|i| activesense_core::world::geometry::length(plan.vertex(i + 1) - plan.vertex(i)))
         .fold(f32::INFINITY, f32::min);
     if min_edge < 0.3 {
         return None;

@@ -9,7 +9,7 @@
 //! with every result (it is serialised into trajectories and result files).
 
 use activesense_core::episode::{SCAN_FOV, SCAN_PIXELS};
-use activesense_core::geometry::{unit, Vec2};
+use activesense_core::world::geometry::{unit, Vec2};
 use activesense_core::FloorPlan;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -141,7 +141,7 @@ impl SensorModel {
 /// A standard normal draw by Box–Muller through libm (platform-independent bits; rand_distr
 /// would use the platform's `exp`/`ln`).
 pub fn standard_normal<R: Rng>(rng: &mut R) -> f32 {
-    use activesense_core::math::{cos, ln, sqrt, TAU};
+    use activesense_core::world::math::{cos, ln, sqrt, TAU};
     // u1 in (0, 1]: never ln(0).
     let u1 = 1.0 - rng.gen_range(0.0f32..1.0);
     let u2: f32 = rng.gen_range(0.0f32..1.0);
@@ -151,7 +151,7 @@ pub fn standard_normal<R: Rng>(rng: &mut R) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use activesense_core::geometry::v2;
+    use activesense_core::world::geometry::v2;
     use rand::SeedableRng;
     use rand_pcg::Pcg32;
 

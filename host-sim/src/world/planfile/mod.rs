@@ -22,11 +22,11 @@
 mod from_dxf;
 mod from_geojson;
 
-use activesense_core::agents::AgentKind;
+use activesense_core::episode::AgentKind;
+use activesense_core::episode::Termination;
 use activesense_core::episode::{EpisodeConfig, EpisodeParams};
-use activesense_core::geometry::v2;
-use activesense_core::pipeline::Termination;
-use activesense_core::runner::EpisodeRunner;
+use activesense_core::pipeline::runner::EpisodeRunner;
+use activesense_core::world::geometry::v2;
 use activesense_core::{FloorPlan, PlanError, Pose2, MAX_VERTICES};
 use from_dxf::dxf_rooms;
 use from_geojson::geojson_rooms;
