@@ -70,534 +70,41 @@ const fn cli(
     }
 }
 
-/// Every committed artifact, in dependency order.
+/// Every committed artifact, in dependency order (one step a line: a table, not prose).
+#[rustfmt::skip]
 pub const STEPS: &[Step] = &[
-    cli(
-        "policy-k1",
-        "policies/k1",
-        &[
-            "train",
-            "--rot-bins",
-            "1",
-            "--updates",
-            "12000",
-            "--seed",
-            "1",
-            "--log-every",
-            "50",
-            "--out",
-            "policies/k1",
-        ],
-        210,
-    ),
-    cli(
-        "policy-k10",
-        "policies/k10",
-        &[
-            "train",
-            "--rot-bins",
-            "10",
-            "--updates",
-            "8000",
-            "--seed",
-            "1",
-            "--lr",
-            "1e-4",
-            "--log-every",
-            "50",
-            "--out",
-            "policies/k10",
-        ],
-        1500,
-    ),
-    cli(
-        "ablation-k1-no-registration-reward",
-        "policies/ablations/k1-no-registration-reward",
-        &[
-            "train",
-            "--rot-bins",
-            "1",
-            "--updates",
-            "12000",
-            "--seed",
-            "1",
-            "--log-every",
-            "50",
-            "--registration-reward",
-            "0",
-            "--out",
-            "policies/ablations/k1-no-registration-reward",
-        ],
-        210,
-    ),
-    cli(
-        "ablation-k1-no-scans",
-        "policies/ablations/k1-no-scans",
-        &[
-            "train",
-            "--rot-bins",
-            "1",
-            "--updates",
-            "12000",
-            "--seed",
-            "1",
-            "--log-every",
-            "50",
-            "--inputs",
-            "no-scans",
-            "--out",
-            "policies/ablations/k1-no-scans",
-        ],
-        210,
-    ),
-    cli(
-        "ablation-k1-no-belief",
-        "policies/ablations/k1-no-belief",
-        &[
-            "train",
-            "--rot-bins",
-            "1",
-            "--updates",
-            "12000",
-            "--seed",
-            "1",
-            "--log-every",
-            "50",
-            "--inputs",
-            "no-belief",
-            "--out",
-            "policies/ablations/k1-no-belief",
-        ],
-        210,
-    ),
-    cli(
-        "ablation-k10-no-registration-reward",
-        "policies/ablations/k10-no-registration-reward",
-        &[
-            "train",
-            "--rot-bins",
-            "10",
-            "--updates",
-            "8000",
-            "--seed",
-            "1",
-            "--lr",
-            "1e-4",
-            "--log-every",
-            "50",
-            "--registration-reward",
-            "0",
-            "--out",
-            "policies/ablations/k10-no-registration-reward",
-        ],
-        1500,
-    ),
-    cli(
-        "ablation-k10-no-scans",
-        "policies/ablations/k10-no-scans",
-        &[
-            "train",
-            "--rot-bins",
-            "10",
-            "--updates",
-            "8000",
-            "--seed",
-            "1",
-            "--lr",
-            "1e-4",
-            "--log-every",
-            "50",
-            "--inputs",
-            "no-scans",
-            "--out",
-            "policies/ablations/k10-no-scans",
-        ],
-        1500,
-    ),
-    cli(
-        "ablation-k10-no-belief",
-        "policies/ablations/k10-no-belief",
-        &[
-            "train",
-            "--rot-bins",
-            "10",
-            "--updates",
-            "8000",
-            "--seed",
-            "1",
-            "--lr",
-            "1e-4",
-            "--log-every",
-            "50",
-            "--inputs",
-            "no-belief",
-            "--out",
-            "policies/ablations/k10-no-belief",
-        ],
-        1500,
-    ),
-    cli(
-        "int8-k1",
-        "policies/k1",
-        &[
-            "policy",
-            "quantize",
-            "--policy",
-            "policies/k1/policy.policy",
-            "--out",
-            "policies/k1/policy.q8",
-        ],
-        1,
-    ),
-    cli(
-        "int8-k10",
-        "policies/k10",
-        &[
-            "policy",
-            "quantize",
-            "--policy",
-            "policies/k10/policy.policy",
-            "--out",
-            "policies/k10/policy.q8",
-        ],
-        2,
-    ),
-    cli(
-        "agreement",
-        "results",
-        &[
-            "policy",
-            "agreement",
-            "--rot-bins",
-            "1,10",
-            "--plans",
-            "200",
-            "--int8",
-            "policies/k1/policy.q8",
-            "--int8",
-            "policies/k10/policy.q8",
-            "--json",
-            "results/policy-agreement.json",
-        ],
-        60,
-    ),
-    Step {
-        rebuilds: true,
-        ..cli("calibration", "results/calibration", &["calibrate"], 510)
-    },
-    cli(
-        "main-job",
-        "results",
-        &[
-            "eval",
-            "--agents",
-            "all",
-            "--rot-bins",
-            "1,10",
-            "--plans",
-            "1000",
-            "--out",
-            "results/",
-            "--no-progress",
-        ],
-        180,
-    ),
-    cli(
-        "confident",
-        "results/confident",
-        &[
-            "eval",
-            "--agents",
-            "heuristic-1,learnt,learnt-int8,eem",
-            "--rot-bins",
-            "1,10",
-            "--plans",
-            "1000",
-            "--termination",
-            "confident",
-            "--curve-plans",
-            "0",
-            "--out",
-            "results/confident",
-        ],
-        300,
-    ),
-    cli(
-        "greedy",
-        "results/greedy",
-        &[
-            "eval",
-            "--agents",
-            "oigm,oigm-cost,eem,heuristic-1",
-            "--rot-bins",
-            "1,10",
-            "--plans",
-            "1000",
-            "--out",
-            "results/greedy",
-            "--no-progress",
-        ],
-        423,
-    ),
-    cli(
-        "greedy-confident",
-        "results/greedy-confident",
-        &[
-            "eval",
-            "--agents",
-            "oigm,oigm-cost,eem,heuristic-1",
-            "--rot-bins",
-            "1,10",
-            "--plans",
-            "1000",
-            "--termination",
-            "confident",
-            "--out",
-            "results/greedy-confident",
-        ],
-        660,
-    ),
-    cli(
-        "eval-ablation-k1-no-registration-reward",
-        "results/ablations/k1-no-registration-reward",
-        &[
-            "eval",
-            "--agents",
-            "learnt",
-            "--policy",
-            "policies/ablations/k1-no-registration-reward/policy.policy",
-            "--rot-bins",
-            "1",
-            "--plans",
-            "1000",
-            "--out",
-            "results/ablations/k1-no-registration-reward",
-            "--no-progress",
-        ],
-        15,
-    ),
-    cli(
-        "eval-ablation-k1-no-scans",
-        "results/ablations/k1-no-scans",
-        &[
-            "eval",
-            "--agents",
-            "learnt",
-            "--policy",
-            "policies/ablations/k1-no-scans/policy.policy",
-            "--rot-bins",
-            "1",
-            "--plans",
-            "1000",
-            "--out",
-            "results/ablations/k1-no-scans",
-            "--no-progress",
-        ],
-        15,
-    ),
-    cli(
-        "eval-ablation-k1-no-belief",
-        "results/ablations/k1-no-belief",
-        &[
-            "eval",
-            "--agents",
-            "learnt",
-            "--policy",
-            "policies/ablations/k1-no-belief/policy.policy",
-            "--rot-bins",
-            "1",
-            "--plans",
-            "1000",
-            "--out",
-            "results/ablations/k1-no-belief",
-            "--no-progress",
-        ],
-        15,
-    ),
-    cli(
-        "eval-ablation-k10-no-registration-reward",
-        "results/ablations/k10-no-registration-reward",
-        &[
-            "eval",
-            "--agents",
-            "learnt",
-            "--policy",
-            "policies/ablations/k10-no-registration-reward/policy.policy",
-            "--rot-bins",
-            "10",
-            "--plans",
-            "1000",
-            "--out",
-            "results/ablations/k10-no-registration-reward",
-            "--no-progress",
-        ],
-        40,
-    ),
-    cli(
-        "eval-ablation-k10-no-scans",
-        "results/ablations/k10-no-scans",
-        &[
-            "eval",
-            "--agents",
-            "learnt",
-            "--policy",
-            "policies/ablations/k10-no-scans/policy.policy",
-            "--rot-bins",
-            "10",
-            "--plans",
-            "1000",
-            "--out",
-            "results/ablations/k10-no-scans",
-            "--no-progress",
-        ],
-        40,
-    ),
-    cli(
-        "eval-ablation-k10-no-belief",
-        "results/ablations/k10-no-belief",
-        &[
-            "eval",
-            "--agents",
-            "learnt",
-            "--policy",
-            "policies/ablations/k10-no-belief/policy.policy",
-            "--rot-bins",
-            "10",
-            "--plans",
-            "1000",
-            "--out",
-            "results/ablations/k10-no-belief",
-            "--no-progress",
-        ],
-        40,
-    ),
-    cli(
-        "extra",
-        "results/extra",
-        &[
-            "eval",
-            "--agents",
-            "heuristic-1,oigm,learnt",
-            "--rot-bins",
-            "1,10",
-            "--plans",
-            "1000",
-            "--extra-measurements",
-            "10",
-            "--max-actions",
-            "300",
-            "--no-progress",
-            "--out",
-            "results/extra",
-        ],
-        500,
-    ),
-    cli(
-        "bench-localization",
-        "results",
-        &[
-            "bench-localization",
-            "--plans",
-            "100",
-            "--json",
-            "results/bench-localization.json",
-        ],
-        60,
-    ),
-    cli(
-        "bench-registration",
-        "results",
-        &[
-            "bench-registration",
-            "--plans",
-            "1000",
-            "--json",
-            "results/bench-registration.json",
-        ],
-        120,
-    ),
-    cli(
-        "inspect-k1",
-        "docs/inspect/k1",
-        &[
-            "inspect",
-            "--aggregate",
-            "--agent",
-            "learnt",
-            "--rot-bins",
-            "1",
-            "--plans",
-            "200",
-            "--out",
-            "docs/inspect/k1",
-            "--no-progress",
-        ],
-        5,
-    ),
-    cli(
-        "inspect-k10",
-        "docs/inspect/k10",
-        &[
-            "inspect",
-            "--aggregate",
-            "--agent",
-            "learnt",
-            "--rot-bins",
-            "10",
-            "--plans",
-            "200",
-            "--out",
-            "docs/inspect/k10",
-            "--no-progress",
-        ],
-        10,
-    ),
-    Step {
-        runner: Runner::Example("stop_trace"),
-        stdout_to: Some("results/stop-trace/k10.txt"),
-        ..cli("stop-trace", "results/stop-trace", &["1000", "10"], 90)
-    },
-    Step {
-        runner: Runner::Xtask,
-        stdout_to: Some("results/mcu-bench/heuristic-1-oracle.md"),
-        ..cli(
-            "mcu-bench",
-            "results/mcu-bench",
-            &["mcu-bench", "--episodes", "20"],
-            600,
-        )
-    },
-    Step {
-        runner: Runner::Xtask,
-        stdout_to: Some("results/mcu-bench/learnt-int8-oracle.md"),
-        ..cli(
-            "mcu-bench-int8",
-            "results/mcu-bench",
-            &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8"],
-            600,
-        )
-    },
-    Step {
-        runner: Runner::Xtask,
-        stdout_to: Some("results/mcu-bench/heuristic-1-confident.md"),
-        ..cli(
-            "mcu-bench-confident",
-            "results/mcu-bench",
-            &[
-                "mcu-bench",
-                "--episodes",
-                "20",
-                "--termination",
-                "confident",
-            ],
-            900,
-        )
-    },
-    Step {
-        runner: Runner::Xtask,
-        stdout_to: Some("results/size.md"),
-        ..cli("size", "results", &["size"], 120)
-    },
+    cli("policy-k1", "policies/k1", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--out", "policies/k1"], 210),
+    cli("policy-k10", "policies/k10", &["train", "--rot-bins", "10", "--updates", "8000", "--seed", "1", "--lr", "1e-4", "--log-every", "50", "--out", "policies/k10"], 1500),
+    cli("ablation-k1-no-registration-reward", "policies/ablations/k1-no-registration-reward", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--registration-reward", "0", "--out", "policies/ablations/k1-no-registration-reward"], 210),
+    cli("ablation-k1-no-scans", "policies/ablations/k1-no-scans", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--inputs", "no-scans", "--out", "policies/ablations/k1-no-scans"], 210),
+    cli("ablation-k1-no-belief", "policies/ablations/k1-no-belief", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--inputs", "no-belief", "--out", "policies/ablations/k1-no-belief"], 210),
+    cli("ablation-k10-no-registration-reward", "policies/ablations/k10-no-registration-reward", &["train", "--rot-bins", "10", "--updates", "8000", "--seed", "1", "--lr", "1e-4", "--log-every", "50", "--registration-reward", "0", "--out", "policies/ablations/k10-no-registration-reward"], 1500),
+    cli("ablation-k10-no-scans", "policies/ablations/k10-no-scans", &["train", "--rot-bins", "10", "--updates", "8000", "--seed", "1", "--lr", "1e-4", "--log-every", "50", "--inputs", "no-scans", "--out", "policies/ablations/k10-no-scans"], 1500),
+    cli("ablation-k10-no-belief", "policies/ablations/k10-no-belief", &["train", "--rot-bins", "10", "--updates", "8000", "--seed", "1", "--lr", "1e-4", "--log-every", "50", "--inputs", "no-belief", "--out", "policies/ablations/k10-no-belief"], 1500),
+    cli("int8-k1", "policies/k1", &["policy", "quantize", "--policy", "policies/k1/policy.policy", "--out", "policies/k1/policy.q8"], 1),
+    cli("int8-k10", "policies/k10", &["policy", "quantize", "--policy", "policies/k10/policy.policy", "--out", "policies/k10/policy.q8"], 2),
+    cli("agreement", "results", &["policy", "agreement", "--rot-bins", "1,10", "--plans", "200", "--int8", "policies/k1/policy.q8", "--int8", "policies/k10/policy.q8", "--json", "results/policy-agreement.json"], 60),
+    Step { rebuilds: true, ..cli("calibration", "results/calibration", &["calibrate"], 510) },
+    cli("main-job", "results", &["eval", "--agents", "all", "--rot-bins", "1,10", "--plans", "1000", "--out", "results/", "--no-progress"], 180),
+    cli("confident", "results/confident", &["eval", "--agents", "heuristic-1,learnt,learnt-int8,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--curve-plans", "0", "--out", "results/confident"], 300),
+    cli("greedy", "results/greedy", &["eval", "--agents", "oigm,oigm-cost,eem,heuristic-1", "--rot-bins", "1,10", "--plans", "1000", "--out", "results/greedy", "--no-progress"], 423),
+    cli("greedy-confident", "results/greedy-confident", &["eval", "--agents", "oigm,oigm-cost,eem,heuristic-1", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--out", "results/greedy-confident"], 660),
+    cli("eval-ablation-k1-no-registration-reward", "results/ablations/k1-no-registration-reward", &["eval", "--agents", "learnt", "--policy", "policies/ablations/k1-no-registration-reward/policy.policy", "--rot-bins", "1", "--plans", "1000", "--out", "results/ablations/k1-no-registration-reward", "--no-progress"], 15),
+    cli("eval-ablation-k1-no-scans", "results/ablations/k1-no-scans", &["eval", "--agents", "learnt", "--policy", "policies/ablations/k1-no-scans/policy.policy", "--rot-bins", "1", "--plans", "1000", "--out", "results/ablations/k1-no-scans", "--no-progress"], 15),
+    cli("eval-ablation-k1-no-belief", "results/ablations/k1-no-belief", &["eval", "--agents", "learnt", "--policy", "policies/ablations/k1-no-belief/policy.policy", "--rot-bins", "1", "--plans", "1000", "--out", "results/ablations/k1-no-belief", "--no-progress"], 15),
+    cli("eval-ablation-k10-no-registration-reward", "results/ablations/k10-no-registration-reward", &["eval", "--agents", "learnt", "--policy", "policies/ablations/k10-no-registration-reward/policy.policy", "--rot-bins", "10", "--plans", "1000", "--out", "results/ablations/k10-no-registration-reward", "--no-progress"], 40),
+    cli("eval-ablation-k10-no-scans", "results/ablations/k10-no-scans", &["eval", "--agents", "learnt", "--policy", "policies/ablations/k10-no-scans/policy.policy", "--rot-bins", "10", "--plans", "1000", "--out", "results/ablations/k10-no-scans", "--no-progress"], 40),
+    cli("eval-ablation-k10-no-belief", "results/ablations/k10-no-belief", &["eval", "--agents", "learnt", "--policy", "policies/ablations/k10-no-belief/policy.policy", "--rot-bins", "10", "--plans", "1000", "--out", "results/ablations/k10-no-belief", "--no-progress"], 40),
+    cli("extra", "results/extra", &["eval", "--agents", "heuristic-1,oigm,learnt", "--rot-bins", "1,10", "--plans", "1000", "--extra-measurements", "10", "--max-actions", "300", "--no-progress", "--out", "results/extra"], 500),
+    cli("bench-localization", "results", &["bench-localization", "--plans", "100", "--json", "results/bench-localization.json"], 60),
+    cli("bench-registration", "results", &["bench-registration", "--plans", "1000", "--json", "results/bench-registration.json"], 120),
+    cli("inspect-k1", "docs/inspect/k1", &["inspect", "--aggregate", "--agent", "learnt", "--rot-bins", "1", "--plans", "200", "--out", "docs/inspect/k1", "--no-progress"], 5),
+    cli("inspect-k10", "docs/inspect/k10", &["inspect", "--aggregate", "--agent", "learnt", "--rot-bins", "10", "--plans", "200", "--out", "docs/inspect/k10", "--no-progress"], 10),
+    Step { runner: Runner::Example("stop_trace"), stdout_to: Some("results/stop-trace/k10.txt"), ..cli("stop-trace", "results/stop-trace", &["1000", "10"], 90) },
+    Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-oracle.md"), ..cli("mcu-bench", "results/mcu-bench", &["mcu-bench", "--episodes", "20"], 600) },
+    Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-oracle.md"), ..cli("mcu-bench-int8", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8"], 600) },
+    Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-confident.md"), ..cli("mcu-bench-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--termination", "confident"], 900) },
+    Step { runner: Runner::Xtask, stdout_to: Some("results/size.md"), ..cli("size", "results", &["size"], 120) },
 ];
 
 /// The root of the workspace.
@@ -906,6 +413,20 @@ fn check_blobs(bin: &Path, dir: &Path) -> Result<Vec<String>> {
     Ok(stale)
 }
 
+/// `args` with the values of the given flags replaced (`--plans 1000` → `--plans 10`).
+fn overridden(args: &[&str], with: &[(&str, &str)]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        out.push(a.to_string());
+        if let Some((_, v)) = with.iter().find(|(f, _)| f == a) {
+            it.next();
+            out.push(v.to_string());
+        }
+    }
+    out
+}
+
 /// Plans per committed evaluation that `--check` replays.
 pub const CHECK_PLANS: usize = 10;
 
@@ -927,23 +448,9 @@ fn check_eval_prefixes(bin: &Path, dir: &Path) -> Result<Vec<String>> {
         let out = dir.join(s.name);
         let out_str = out.to_string_lossy().into_owned();
         let plans = CHECK_PLANS.to_string();
-        let mut args: Vec<&str> = Vec::new();
-        let mut it = s.args.iter();
-        while let Some(a) = it.next() {
-            match *a {
-                "--plans" => {
-                    it.next();
-                    args.extend(["--plans", &plans]);
-                }
-                "--out" => {
-                    it.next();
-                    args.extend(["--out", &out_str]);
-                }
-                other => args.push(other),
-            }
-        }
-        if !args.contains(&"--no-progress") {
-            args.push("--no-progress");
+        let mut args = overridden(s.args, &[("--plans", &plans), ("--out", &out_str)]);
+        if !args.iter().any(|a| a == "--no-progress") {
+            args.push("--no-progress".into());
         }
         super::run(
             Command::new(bin)
@@ -1026,21 +533,7 @@ fn check_curves(bin: &Path, dir: &Path) -> Result<Vec<String>> {
         let out = dir.join(s.name);
         let out_str = out.to_string_lossy().into_owned();
         let updates = CHECK_UPDATES.to_string();
-        let mut args: Vec<&str> = Vec::new();
-        let mut it = s.args.iter();
-        while let Some(a) = it.next() {
-            match *a {
-                "--updates" => {
-                    it.next();
-                    args.extend(["--updates", &updates]);
-                }
-                "--out" => {
-                    it.next();
-                    args.extend(["--out", &out_str]);
-                }
-                other => args.push(other),
-            }
-        }
+        let args = overridden(s.args, &[("--updates", &updates), ("--out", &out_str)]);
         super::run(
             Command::new(bin)
                 .args(&args)
