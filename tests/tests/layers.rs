@@ -31,6 +31,22 @@ const CORE_LAYERS: &[&[&str]] = &[
     &["device"],
 ];
 
+/// The host's modules, lowest first, as `host-sim/src/lib.rs` lists them: each imports only
+/// from modules before it (one module a layer).
+const HOST_LAYERS: &[&str] = &[
+    "world",
+    "episode",
+    "baselines",
+    "plot",
+    "learn",
+    "eval",
+    "bench",
+    "calibrate",
+    "inspect",
+    "link",
+    "cli",
+];
+
 /// What the protocol may import: the wire sits below the algorithms, as smoltcp's `wire`
 /// sits below `iface` and `socket`.
 const PROTOCOL_MAY_IMPORT: &[&str] = &["limits", "checksum", "world", "episode"];
@@ -341,6 +357,46 @@ fn core_layers_import_only_downwards() {
 }
 
 #[test]
+fn host_modules_import_only_from_earlier_ones() {
+    let g = graph(&workspace().join("host-sim/src"));
+    let layer = |m: &Module| {
+        m.first()
+            .and_then(|t| HOST_LAYERS.iter().position(|l| l == t))
+    };
+    let mut wrong = Vec::new();
+    for (m, to) in &g.edges {
+        let Some(lm) = layer(m) else {
+            assert!(
+                m.is_empty(),
+                "host module {} is not in HOST_LAYERS (nor lib.rs's table)",
+                show(m)
+            );
+            continue;
+        };
+        for t in to {
+            if layer(t).is_none_or(|lt| lt > lm) {
+                wrong.push(format!("{} imports {}", show(m), show(t)));
+            }
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "host imports against the lib.rs order:\n  {}",
+        wrong.join("\n  ")
+    );
+    let lib = std::fs::read_to_string(workspace().join("host-sim/src/lib.rs")).unwrap();
+    let listed: Vec<&str> = lib
+        .lines()
+        .filter_map(|l| l.strip_prefix("//! | [`"))
+        .map(|l| l.split('`').next().unwrap_or(""))
+        .collect();
+    assert_eq!(
+        listed, HOST_LAYERS,
+        "host-sim/src/lib.rs's table and HOST_LAYERS differ"
+    );
+}
+
+#[test]
 fn protocol_imports_nothing_above_the_episode_layer() {
     let g = graph(&workspace().join("core-nostd/src"));
     let mut wrong = Vec::new();
@@ -494,4 +550,51 @@ fn the_checker_ignores_tests_comments_and_parents() {
     ]);
     assert!(cycles(&g.edges).is_empty(), "{:?}", g.edges);
     assert!(g.edges[&vec!["b".to_string()]].contains(&vec!["a".to_string(), "x".to_string()]));
+}
+
+#[test]
+fn the_docs_name_only_source_paths_that_exist() {
+    // A moved file leaves stale paths behind in prose; every `core-nostd/…`, `host-sim/…`,
+    // `firmware/…`, `xtask/…` and `tests/…` path the README and docs/ name must exist.
+    let root = workspace();
+    let mut docs = vec![root.join("README.md")];
+    for e in std::fs::read_dir(root.join("docs")).unwrap().flatten() {
+        if e.path().extension().is_some_and(|x| x == "md") {
+            docs.push(e.path());
+        }
+    }
+    let mut missing = Vec::new();
+    for doc in &docs {
+        let text = std::fs::read_to_string(doc).unwrap();
+        for prefix in ["core-nostd/", "host-sim/", "firmware/", "xtask/", "tests/"] {
+            let mut at = 0;
+            while let Some(i) = text[at..].find(prefix) {
+                let s = at + i;
+                at = s + prefix.len();
+                let before = text[..s].chars().last();
+                if before.is_some_and(|c| c.is_alphanumeric() || c == '/' || c == '-' || c == '_') {
+                    continue;
+                }
+                let path: String = text[s..]
+                    .chars()
+                    .take_while(|c| c.is_alphanumeric() || "_./-{},".contains(*c))
+                    .collect();
+                let path = path.trim_end_matches(['.', ',']);
+                if path.contains('{') || path.ends_with('/') && path.len() == prefix.len() {
+                    continue;
+                }
+                if !root.join(path).exists() {
+                    missing.push(format!(
+                        "{}: {path}",
+                        doc.strip_prefix(&root).unwrap().display()
+                    ));
+                }
+            }
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "the docs name paths that do not exist:\n  {}",
+        missing.join("\n  ")
+    );
 }
