@@ -86,7 +86,10 @@ pub fn measure(elf: &Path) -> Result<Sizes> {
 /// Prints the table and fails when a budget is exceeded.
 pub fn report(elf: &Path) -> Result<()> {
     let s = measure(elf)?;
-    println!("{}", elf.display());
+    // Relative to the workspace, so that the table is the same file on every checkout
+    // (`results/size.md`, compared by `cargo xtask reproduce --check`).
+    let shown = elf.strip_prefix(crate::root()).unwrap_or(elf);
+    println!("{}", shown.display());
     println!("{:<16} {:>10} {:>9}  region", "section", "address", "bytes");
     for (name, addr, size, f, r) in &s.sections {
         let region = if *f {
