@@ -270,6 +270,12 @@ fn mcu_bench(args: &[String]) -> Result<()> {
     }
     setup()?;
     let elf = build_firmware()?;
+    // Relative to the workspace (the CLI runs there), so the table's header line is the same
+    // on every checkout (`results/mcu-bench/`).
+    let elf = elf
+        .strip_prefix(root())
+        .map(Path::to_path_buf)
+        .unwrap_or(elf);
     run(activesense_cli()
         .args([
             "mcu-bench",

@@ -1,0 +1,201 @@
+//! The README's tables against the files they come from: a figure in the README cannot drift
+//! from its committed result without this test failing (issue 23). Checked here: the "ours"
+//! rows of Table 4 against `results/results.json`, the calibrated-stop table against
+//! `results/confident/results.json`, the three MCU tables against `results/mcu-bench/*.md`
+//! (verbatim), and the size table against `results/size.md`.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+fn read(rel: &str) -> String {
+    std::fs::read_to_string(root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+fn json(rel: &str) -> Value {
+    serde_json::from_str(&read(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
+}
+
+/// The result row of `agent` at `k` rotation bins.
+fn row<'a>(results: &'a Value, agent: &str, k: u64) -> &'a Value {
+    results["results"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["agent"] == agent && r["rot_bins"] == k)
+        .unwrap_or_else(|| panic!("no row {agent} K = {k}"))
+}
+
+fn f(r: &Value, key: &str) -> f64 {
+    r[key].as_f64().unwrap_or_else(|| panic!("{key} missing"))
+}
+
+/// Cells of a markdown table row (`| a | b |` → `["a", "b"]`).
+fn cells(line: &str) -> Vec<String> {
+    line.trim()
+        .trim_matches('|')
+        .split('|')
+        .map(|c| c.trim().replace("**", ""))
+        .collect()
+}
+
+#[test]
+fn table_4_ours_rows_are_the_main_job() {
+    let readme = read("README.md");
+    let results = json("results/results.json");
+    let section = &readme[readme
+        .find("## Results: the paper's Table 4 and ours")
+        .unwrap()..];
+    let mut agent = String::new();
+    let mut checked = 0;
+    for line in section
+        .lines()
+        .skip_while(|l| !l.starts_with("| agent"))
+        .skip(2)
+    {
+        if !line.starts_with('|') {
+            break;
+        }
+        let c = cells(line);
+        if !c[0].is_empty() {
+            agent = c[0].clone();
+        }
+        let name = match (agent.as_str(), c[1].as_str()) {
+            (_, "paper") => continue,
+            ("learnt policy", "ours (float)") => "learnt".to_string(),
+            ("learnt policy", _) => "learnt-int8".to_string(),
+            (a, _) => a.to_string(),
+        };
+        let (k1, k10) = (row(&results, &name, 1), row(&results, &name, 10));
+        let columns = [
+            ("recognition_rate", 3),
+            ("pose_error", 4),
+            ("measurements", 3),
+            ("rotations", 3),
+            ("cost", 3),
+        ];
+        for ((key, digits), cell) in columns.iter().zip(&c[2..]) {
+            let want = format!(
+                "{:.d$} ({:.d$})",
+                f(k1, key),
+                f(k10, key),
+                d = *digits as usize
+            );
+            assert_eq!(cell, &want, "README Table 4, {name}, {key}");
+        }
+        checked += 1;
+    }
+    assert!(checked >= 9, "only {checked} 'ours' rows found in Table 4");
+}
+
+#[test]
+fn the_calibrated_stop_table_is_results_confident() {
+    let readme = read("README.md");
+    let confident = json("results/confident/results.json");
+    let section = &readme[readme
+        .find("## Stopping without ground truth: the calibrated stop")
+        .unwrap()..];
+    let mut checked = 0;
+    for line in section
+        .lines()
+        .skip_while(|l| !l.starts_with("| agent"))
+        .skip(2)
+    {
+        if !line.starts_with('|') {
+            break;
+        }
+        let c = cells(line);
+        let k: u64 = c[1].parse().unwrap();
+        let r = row(&confident, &c[0], k);
+        let episodes = f(r, "plans");
+        let recognition = c[2].split(' ').next().unwrap();
+        assert_eq!(
+            recognition,
+            format!("{:.3}", f(r, "recognition_rate")),
+            "{line}"
+        );
+        assert_eq!(c[3], format!("{:.3}", f(r, "stops") / episodes), "{line}");
+        let wrong = f(r, "wrong_stops");
+        assert_eq!(
+            c[4],
+            format!("{wrong} ({:.1} %)", 100.0 * wrong / f(r, "stops")),
+            "{line}"
+        );
+        assert_eq!(
+            c[5],
+            format!("{:.2} %", 100.0 * f(r, "mean_risk_at_stop")),
+            "{line}"
+        );
+        assert_eq!(c[7], format!("{:.4}", f(r, "pose_error")), "{line}");
+        assert_eq!(c[8], format!("{:.2}", f(r, "measurements")), "{line}");
+        assert_eq!(c[9], format!("{:.3}", f(r, "cost")), "{line}");
+        checked += 1;
+    }
+    assert!(
+        checked >= 6,
+        "only {checked} rows found in the calibrated-stop table"
+    );
+}
+
+#[test]
+fn the_mcu_tables_are_the_committed_benchmark_output() {
+    let readme = read("README.md");
+    for file in [
+        "results/mcu-bench/heuristic-1-oracle.md",
+        "results/mcu-bench/learnt-int8-oracle.md",
+        "results/mcu-bench/heuristic-1-confident.md",
+    ] {
+        let text = read(file);
+        let rows: Vec<&str> = text
+            .lines()
+            .filter(|l| l.starts_with("| 1") || l.starts_with("| 10"))
+            .collect();
+        assert_eq!(rows.len(), 2, "{file}: expected a K = 1 and a K = 10 row");
+        for r in rows {
+            assert!(readme.contains(r), "README lacks this row of {file}:\n{r}");
+        }
+    }
+}
+
+#[test]
+fn the_size_table_is_results_size() {
+    let readme = read("README.md");
+    let size = read("results/size.md");
+    let number = |prefix: &str| -> u64 {
+        let line = size.lines().find(|l| l.starts_with(prefix)).unwrap();
+        line[prefix.len()..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let with_commas = |n: u64| {
+        let s = n.to_string();
+        let mut out = String::new();
+        for (i, ch) in s.chars().enumerate() {
+            if i > 0 && (s.len() - i) % 3 == 0 {
+                out.push(',');
+            }
+            out.push(ch);
+        }
+        out
+    };
+    for (prefix, what) in [("flash: ", "flash"), ("static RAM: ", "static RAM")] {
+        let n = with_commas(number(prefix));
+        let line = readme
+            .lines()
+            .find(|l| l.starts_with(&format!("| {what} (")))
+            .unwrap_or_else(|| panic!("README has no {what} row"));
+        assert!(
+            line.contains(&n),
+            "README's {what} row lacks {n} (results/size.md):\n{line}"
+        );
+    }
+}
