@@ -9,7 +9,7 @@
 //! fitted on the even-indexed plans and checked on the odd-indexed ones: the reliability
 //! of its estimate at every step, and what the stop rule "stop at the first step whose
 //! estimated risk is below P" would have done there. The models are written as Rust
-//! source (`core-nostd/src/stop_calibration.rs`, compiled into the host and the firmware
+//! source (`core-nostd/src/stop/calibration.rs`, compiled into the host and the firmware
 //! alike) and the report as `calibration.md` / `calibration.json`.
 
 use crate::episode::{parse_agent, Termination};
@@ -284,7 +284,7 @@ pub struct Fitted {
     pub held_out: HeldOut,
 }
 
-/// The Rust source of `stop_calibration.rs`.
+/// The Rust source of `stop/calibration.rs`.
 pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
     let mut s = String::new();
     s.push_str("//! The calibrated stop's models ([`crate::stop::StopModel`]), one per rotation setting.\n");
@@ -312,7 +312,7 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
 pub fn markdown(fitted: &[Fitted], command: &str) -> String {
     let mut s = String::from("# Calibrated stop: fit and held-out check\n\n");
     s.push_str(&format!("Produced by `{command}`.\n\n"));
-    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the edge of the refined pose's cell, fraction of bearings unexplained, repeated readings per bearing, refined pose and argmax disagree (`core-nostd/src/stop.rs`; readings and explained readings are counted per distinct bearing).\n\n");
+    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the edge of the refined pose's cell, fraction of bearings unexplained, repeated readings per bearing, refined pose and argmax disagree (`core-nostd/src/stop/mod.rs`; readings and explained readings are counted per distinct bearing).\n\n");
     for f in fitted {
         let h = &f.held_out;
         s.push_str(&format!(

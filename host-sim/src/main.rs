@@ -57,7 +57,7 @@ enum Command {
     Inspect(activesense_sim::inspect::InspectArgs),
     /// Fit the calibrated stop (--termination confident, --stop-risk): run episodes on
     /// calibration plans, fit P(wrong registration) from the belief and the readings, and
-    /// write the models the core compiles (core-nostd/src/stop_calibration.rs) with a
+    /// write the models the core compiles (core-nostd/src/stop/calibration.rs) with a
     /// held-out check (results/calibration/).
     Calibrate(activesense_sim::calibrate::CalibrateArgs),
 }
