@@ -45,6 +45,20 @@ fn cells(line: &str) -> Vec<String> {
         .collect()
 }
 
+/// The rows (as cells) of the first table after `heading` in `text`, header and rule left out.
+fn table_after(text: &str, heading: &str) -> Vec<Vec<String>> {
+    let at = text
+        .find(heading)
+        .unwrap_or_else(|| panic!("no section {heading}"));
+    text[at..]
+        .lines()
+        .skip_while(|l| !l.starts_with("| agent"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(cells)
+        .collect()
+}
+
 #[test]
 fn table_4_ours_rows_are_the_main_job() {
     let readme = read("README.md");
