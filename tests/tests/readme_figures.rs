@@ -63,20 +63,9 @@ fn table_after(text: &str, heading: &str) -> Vec<Vec<String>> {
 fn table_4_ours_rows_are_the_main_job() {
     let readme = read("README.md");
     let results = json("results/results.json");
-    let section = &readme[readme
-        .find("## Results: the paper's Table 4 and ours")
-        .unwrap()..];
     let mut agent = String::new();
     let mut checked = 0;
-    for line in section
-        .lines()
-        .skip_while(|l| !l.starts_with("| agent"))
-        .skip(2)
-    {
-        if !line.starts_with('|') {
-            break;
-        }
-        let c = cells(line);
+    for c in table_after(&readme, "## Results: the paper's Table 4 and ours") {
         if !c[0].is_empty() {
             agent = c[0].clone();
         }
@@ -112,19 +101,12 @@ fn table_4_ours_rows_are_the_main_job() {
 fn the_calibrated_stop_table_is_results_confident() {
     let readme = read("README.md");
     let confident = json("results/confident/results.json");
-    let section = &readme[readme
-        .find("## Stopping without ground truth: the calibrated stop")
-        .unwrap()..];
     let mut checked = 0;
-    for line in section
-        .lines()
-        .skip_while(|l| !l.starts_with("| agent"))
-        .skip(2)
-    {
-        if !line.starts_with('|') {
-            break;
-        }
-        let c = cells(line);
+    for c in table_after(
+        &readme,
+        "## Stopping without ground truth: the calibrated stop",
+    ) {
+        let line = c.join(" | ");
         let k: u64 = c[1].parse().unwrap();
         let r = row(&confident, &c[0], k);
         let episodes = f(r, "plans");
@@ -194,7 +176,7 @@ fn the_size_table_is_results_size() {
         let s = n.to_string();
         let mut out = String::new();
         for (i, ch) in s.chars().enumerate() {
-            if i > 0 && (s.len() - i) % 3 == 0 {
+            if i > 0 && (s.len() - i).is_multiple_of(3) {
                 out.push(',');
             }
             out.push(ch);
