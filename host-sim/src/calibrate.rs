@@ -295,13 +295,17 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
     s.push_str("use crate::stop::StopModel;\n\n");
     s.push_str("/// One model per fitted rotation setting.\npub const MODELS: &[StopModel] = &[\n");
     for f in fitted {
-        let w: Vec<String> = f.model.weights.iter().map(|w| format!("{w:?}")).collect();
+        // One weight a line, as rustfmt lays the array out: the generated file is the
+        // committed file byte for byte, and `cargo fmt --check` leaves it alone.
+        let w: String = f
+            .model
+            .weights
+            .iter()
+            .map(|w| format!("            {w:?},\n"))
+            .collect();
         s.push_str(&format!(
-            "    // {} decision points.\n    StopModel {{\n        rot_bins: {},\n        weights: [{}],\n        bias: {:?},\n    }},\n",
-            f.fit_samples,
-            f.model.rot_bins,
-            w.join(", "),
-            f.model.bias
+            "    // {} decision points.\n    StopModel {{\n        rot_bins: {},\n        weights: [\n{}        ],\n        bias: {:?},\n    }},\n",
+            f.fit_samples, f.model.rot_bins, w, f.model.bias
         ));
     }
     s.push_str("];\n");

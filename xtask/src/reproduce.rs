@@ -84,7 +84,7 @@ pub const STEPS: &[Step] = &[
     cli("int8-k1", "policies/k1", &["policy", "quantize", "--policy", "policies/k1/policy.policy", "--out", "policies/k1/policy.q8"], 1),
     cli("int8-k10", "policies/k10", &["policy", "quantize", "--policy", "policies/k10/policy.policy", "--out", "policies/k10/policy.q8"], 2),
     cli("agreement", "results", &["policy", "agreement", "--rot-bins", "1,10", "--plans", "200", "--int8", "policies/k1/policy.q8", "--int8", "policies/k10/policy.q8", "--json", "results/policy-agreement.json"], 60),
-    Step { rebuilds: true, ..cli("calibration", "results/calibration", &["calibrate"], 510) },
+    Step { rebuilds: true, ..cli("calibration", "results/calibration", &["calibrate"], 640) },
     cli("main-job", "results", &["eval", "--agents", "all", "--rot-bins", "1,10", "--plans", "1000", "--out", "results/", "--no-progress"], 180),
     cli("confident", "results/confident", &["eval", "--agents", "heuristic-1,learnt,learnt-int8,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--curve-plans", "0", "--out", "results/confident"], 300),
     cli("greedy", "results/greedy", &["eval", "--agents", "oigm,oigm-cost,eem,heuristic-1", "--rot-bins", "1,10", "--plans", "1000", "--out", "results/greedy", "--no-progress"], 423),
@@ -100,7 +100,7 @@ pub const STEPS: &[Step] = &[
     cli("bench-registration", "results", &["bench-registration", "--plans", "1000", "--json", "results/bench-registration.json"], 120),
     cli("inspect-k1", "docs/inspect/k1", &["inspect", "--aggregate", "--agent", "learnt", "--rot-bins", "1", "--plans", "200", "--out", "docs/inspect/k1", "--no-progress"], 5),
     cli("inspect-k10", "docs/inspect/k10", &["inspect", "--aggregate", "--agent", "learnt", "--rot-bins", "10", "--plans", "200", "--out", "docs/inspect/k10", "--no-progress"], 10),
-    Step { runner: Runner::Example("stop_trace"), stdout_to: Some("results/stop-trace/k10.txt"), ..cli("stop-trace", "results/stop-trace", &["1000", "10"], 90) },
+    Step { runner: Runner::Example("stop_trace"), stdout_to: Some("results/stop-trace/k10.txt"), ..cli("stop-trace", "results/stop-trace", &["1000", "10"], 160) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-oracle.md"), ..cli("mcu-bench", "results/mcu-bench", &["mcu-bench", "--episodes", "20"], 120) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-oracle.md"), ..cli("mcu-bench-int8", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8"], 30) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-confident.md"), ..cli("mcu-bench-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--termination", "confident"], 160) },
@@ -158,15 +158,15 @@ fn read_manifest(path: &Path) -> serde_json::Map<String, serde_json::Value> {
         .unwrap_or_default()
 }
 
-fn write_manifest(s: &Step, wall_s: f64) -> Result<()> {
+fn write_manifest(s: &Step, wall_s: f64, commit: &str, dirty: bool) -> Result<()> {
     let path = manifest_path(s);
     let mut steps = read_manifest(&path);
     steps.insert(
         s.name.to_string(),
         serde_json::json!({
             "command": command_line(s),
-            "commit": git(&["rev-parse", "--short=12", "HEAD"]),
-            "dirty": !git(&["status", "--porcelain", "--untracked-files=no"]).is_empty(),
+            "commit": commit,
+            "dirty": dirty,
             "date": utc_now(),
             "wall_s": (wall_s * 10.0).round() / 10.0,
         }),
@@ -329,9 +329,12 @@ pub fn run(args: &[String]) -> Result<()> {
             minutes(t0.elapsed().as_secs() as u32),
             command_line(s)
         );
+        // Dirty means the code the step ran was not the commit's (checked before the step,
+        // which itself rewrites artifacts).
+        let dirty = !git(&["status", "--porcelain", "--untracked-files=no"]).is_empty();
         let t = Instant::now();
         run_step(s, &bin).with_context(|| format!("step {} failed", s.name))?;
-        write_manifest(s, t.elapsed().as_secs_f64())?;
+        write_manifest(s, t.elapsed().as_secs_f64(), &head, dirty)?;
         done_est += s.estimate_s;
         if s.rebuilds {
             bin = release_binary()?;
