@@ -1,6 +1,7 @@
 //! The README's tables against the files they come from: a figure in the README cannot drift
 //! from its committed result without this test failing (issue 23). Checked here: the "ours"
-//! rows of Table 4 against `results/results.json`, the calibrated-stop table against
+//! rows of Table 4 against `results/results.json`, the greedy, greedy-confident and ablation
+//! tables against their runs, the calibrated-stop table against
 //! `results/confident/results.json`, the three MCU tables against `results/mcu-bench/*.md`
 //! (verbatim), and the size table against `results/size.md`.
 
@@ -194,4 +195,108 @@ fn the_size_table_is_results_size() {
             "README's {what} row lacks {n} (results/size.md):\n{line}"
         );
     }
+}
+
+/// `format!("{:.d$}")` of a result field.
+fn fixed(r: &Value, key: &str, digits: usize) -> String {
+    format!("{:.digits$}", f(r, key))
+}
+
+#[test]
+fn the_greedy_table_is_results_greedy() {
+    let readme = read("README.md");
+    let greedy = json("results/greedy/results.json");
+    let main = json("results/results.json");
+    let mut checked = 0;
+    for c in table_after(&readme, "## Greedy benchmarks (paper §4.3)") {
+        let k: u64 = c[1].parse().unwrap();
+        let r = match c[0].as_str() {
+            "learnt (main job)" => row(&main, "learnt", k),
+            agent => row(&greedy, agent, k),
+        };
+        let line = c.join(" | ");
+        assert_eq!(c[2], fixed(r, "recognition_rate", 3), "{line}");
+        assert_eq!(c[3], fixed(r, "pose_error", 4), "{line}");
+        assert_eq!(c[4], fixed(r, "measurements", 2), "{line}");
+        assert_eq!(c[5], fixed(r, "rotations", 2), "{line}");
+        assert_eq!(c[6], fixed(r, "cost", 3), "{line}");
+        let repeated = 100.0 * f(r, "repeated_bearing_fraction");
+        assert_eq!(c[7], format!("{repeated:.0} %"), "{line}");
+        checked += 1;
+    }
+    assert_eq!(checked, 10, "the greedy table has 10 rows");
+}
+
+#[test]
+fn the_greedy_confident_table_is_results_greedy_confident() {
+    let readme = read("README.md");
+    let results = json("results/greedy-confident/results.json");
+    let at = readme
+        .find("results/greedy-confident` (11 min) gives")
+        .unwrap();
+    let rows: Vec<Vec<String>> = readme[at..]
+        .lines()
+        .skip_while(|l| !l.starts_with("| K |"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(cells)
+        .collect();
+    assert_eq!(rows.len(), 2, "a K = 1 and a K = 10 row");
+    for c in rows {
+        let k: u64 = c[0].parse().unwrap();
+        for (agent, cell) in ["oigm", "oigm-cost", "eem", "heuristic-1"]
+            .iter()
+            .zip(&c[1..])
+        {
+            let r = row(&results, agent, k);
+            let want = format!(
+                "{} / {} / {} / {} of {}",
+                fixed(r, "recognition_rate", 3),
+                fixed(r, "measurements", 2),
+                fixed(r, "cost", 3),
+                f(r, "wrong_stops"),
+                f(r, "stops")
+            );
+            assert_eq!(cell, &want, "README greedy-confident, {agent} K = {k}");
+        }
+    }
+}
+
+#[test]
+fn the_ablation_table_is_results_ablations() {
+    let readme = read("README.md");
+    let main = json("results/results.json");
+    let mut checked = 0;
+    let section = "## Ablations (paper §4.4)";
+    let at = readme.find(section).unwrap();
+    let rows: Vec<Vec<String>> = readme[at..]
+        .lines()
+        .skip_while(|l| !l.starts_with("| policy |"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(cells)
+        .collect();
+    for c in rows {
+        let k: u64 = c[1].parse().unwrap();
+        let dir = match c[0].as_str() {
+            "full (committed)" => None,
+            "without the registration-error reward" => Some("no-registration-reward"),
+            "without topological scans" => Some("no-scans"),
+            "without the belief map (scans + history)" => Some("no-belief"),
+            other => panic!("unknown ablation row {other}"),
+        };
+        let results = match dir {
+            None => main.clone(),
+            Some(d) => json(&format!("results/ablations/k{k}-{d}/results.json")),
+        };
+        let r = row(&results, "learnt", k);
+        let line = c.join(" | ");
+        assert_eq!(c[2], fixed(r, "recognition_rate", 3), "{line}");
+        assert_eq!(c[3], fixed(r, "pose_error", 4), "{line}");
+        assert_eq!(c[4], fixed(r, "measurements", 2), "{line}");
+        assert_eq!(c[5], fixed(r, "rotations", 2), "{line}");
+        assert_eq!(c[6], fixed(r, "cost", 3), "{line}");
+        checked += 1;
+    }
+    assert_eq!(checked, 8, "the ablation table has 8 rows");
 }
