@@ -1,7 +1,8 @@
 //! The README's tables against the files they come from: a figure in the README cannot drift
 //! from its committed result without this test failing (issue 23). Checked here: the "ours"
 //! rows of Table 4 against `results/results.json`, the greedy, greedy-confident and ablation
-//! tables against their runs, the calibrated-stop table against
+//! tables against their runs, the int8 agreement table against `results/policy-agreement.json`,
+//! the calibrated-stop table against
 //! `results/confident/results.json`, the three MCU tables against `results/mcu-bench/*.md`
 //! (verbatim), and the size table against `results/size.md`.
 
@@ -299,4 +300,52 @@ fn the_ablation_table_is_results_ablations() {
         checked += 1;
     }
     assert_eq!(checked, 8, "the ablation table has 8 rows");
+}
+
+#[test]
+fn the_agreement_table_is_results_policy_agreement() {
+    let readme = read("README.md");
+    let runs = json("results/policy-agreement.json");
+    let at = readme.find("## The int8 policy on the instrument").unwrap();
+    let rows: Vec<Vec<String>> = readme[at..]
+        .lines()
+        .skip_while(|l| !l.starts_with("| K |"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(cells)
+        .collect();
+    assert_eq!(rows.len(), 2, "a K = 1 and a K = 10 row");
+    for c in rows {
+        let k: u64 = c[0].parse().unwrap();
+        let a = &runs
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["agreement"]["rot_bins"] == k)
+            .unwrap_or_else(|| panic!("no agreement run for K = {k}"))["agreement"];
+        let states = f(a, "states") as u64;
+        let thousands = format!("{},{:03}", states / 1000, states % 1000);
+        let shown = if states >= 1000 {
+            thousands
+        } else {
+            states.to_string()
+        };
+        let line = c.join(" | ");
+        assert_eq!(c[1], shown, "{line}");
+        assert_eq!(c[2], fixed(a, "action_agreement", 4), "{line}");
+        assert_eq!(
+            c[3],
+            format!("{} / {}", f(a, "identical_episodes"), f(a, "plans")),
+            "{line}"
+        );
+        assert_eq!(
+            c[4],
+            format!(
+                "{} / {}",
+                fixed(&a["float"], "success_rate", 3),
+                fixed(&a["int8"], "success_rate", 3)
+            ),
+            "{line}"
+        );
+    }
 }
