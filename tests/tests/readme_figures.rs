@@ -2,7 +2,7 @@
 //! from its committed result without this test failing (issue 23). Checked here: the "ours"
 //! rows of Table 4 against `results/results.json`, the greedy, greedy-confident and ablation
 //! tables against their runs, the int8 agreement table against `results/policy-agreement.json`,
-//! the calibrated-stop table against
+//! the Fig.-4 table against `docs/inspect/k{1,10}/aggregate.md`, the calibrated-stop table against
 //! `results/confident/results.json`, the three MCU tables against `results/mcu-bench/*.md`
 //! (verbatim), and the size table against `results/size.md`.
 
@@ -346,6 +346,46 @@ fn the_agreement_table_is_results_policy_agreement() {
                 fixed(&a["int8"], "success_rate", 3)
             ),
             "{line}"
+        );
+    }
+}
+
+#[test]
+fn the_fig4_table_is_the_committed_aggregates() {
+    // README: | distance | K = 1 measure | K = 1 rotate | K = 10 measure | K = 10 rotate |,
+    // from the "activation, measure / rotate" columns of docs/inspect/k{1,10}/aggregate.md.
+    let readme = read("README.md");
+    let at = readme.find("**Fig. 4 over 200 test plans**").unwrap();
+    let rows: Vec<Vec<String>> = readme[at..]
+        .lines()
+        .skip_while(|l| !l.starts_with("| distance from the visual centre"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(cells)
+        .collect();
+    let aggregate = |k: u32| -> Vec<Vec<String>> {
+        read(&format!("docs/inspect/k{k}/aggregate.md"))
+            .lines()
+            .skip_while(|l| !l.starts_with("| distance from the visual centre"))
+            .skip(2)
+            .take_while(|l| l.starts_with('|'))
+            .map(cells)
+            .collect()
+    };
+    let (k1, k10) = (aggregate(1), aggregate(10));
+    assert_eq!(rows.len(), 6, "six distance bands in the README");
+    assert_eq!(
+        (k1.len(), k10.len()),
+        (6, 6),
+        "six distance bands in each aggregate"
+    );
+    for (i, c) in rows.iter().enumerate() {
+        let want = [&k1[i][2], &k1[i][3], &k10[i][2], &k10[i][3]];
+        assert_eq!(
+            c[1..5].iter().collect::<Vec<_>>(),
+            want,
+            "README Fig.-4 row {}",
+            c[0]
         );
     }
 }
