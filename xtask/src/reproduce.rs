@@ -231,6 +231,9 @@ struct Options {
     resume: bool,
     list: bool,
     check: bool,
+    /// `--check --artifacts DIR`: compare against the artifacts under DIR instead of the
+    /// workspace's (the test that `--check` fails on a stale artifact uses a doctored copy).
+    artifacts: Option<PathBuf>,
 }
 
 fn parse(args: &[String]) -> Result<Options> {
@@ -240,6 +243,7 @@ fn parse(args: &[String]) -> Result<Options> {
         resume: false,
         list: false,
         check: false,
+        artifacts: None,
     };
     let names = |v: Option<&String>, flag: &str| -> Result<Vec<String>> {
         let v = v.with_context(|| format!("{flag} needs step names (see --list)"))?;
@@ -259,7 +263,10 @@ fn parse(args: &[String]) -> Result<Options> {
             "--resume" => o.resume = true,
             "--list" => o.list = true,
             "--check" => o.check = true,
-            other => bail!("reproduce: unknown argument '{other}' (--list, --only A,B, --skip A,B, --resume, --check)"),
+            "--artifacts" => {
+                o.artifacts = Some(PathBuf::from(it.next().context("--artifacts needs a directory")?))
+            }
+            other => bail!("reproduce: unknown argument '{other}' (--list, --only A,B, --skip A,B, --resume, --check, --artifacts DIR)"),
         }
     }
     Ok(o)
@@ -374,17 +381,64 @@ fn scratch() -> Result<PathBuf> {
     Ok(dir)
 }
 
+/// What every check needs: the binary, a scratch directory, where the committed artifacts
+/// are, and which steps to look at.
+struct Ctx<'a> {
+    bin: PathBuf,
+    dir: PathBuf,
+    committed: PathBuf,
+    o: &'a Options,
+}
+
+impl Ctx<'_> {
+    /// A step is checked unless `--only` names steps and not this one, or `--skip` names it.
+    fn step(&self, s: &Step) -> bool {
+        let names_steps = self
+            .o
+            .only
+            .iter()
+            .any(|n| STEPS.iter().any(|t| t.name == n));
+        (!names_steps || self.o.only.iter().any(|n| n == s.name))
+            && !self.o.skip.iter().any(|n| n == s.name)
+    }
+}
+
+/// A check runs when nothing is picked, when it is picked, or when one of its steps is.
+fn check_chosen(c: &Check, o: &Options, steps_of: &dyn Fn(&Step) -> bool) -> bool {
+    if o.skip.iter().any(|n| n == c.name) {
+        return false;
+    }
+    o.only.is_empty()
+        || o.only.iter().any(|n| n == c.name)
+        || STEPS
+            .iter()
+            .any(|s| steps_of(s) && o.only.iter().any(|n| n == s.name))
+}
+
 fn check(o: &Options) -> Result<()> {
-    let bin = release_binary()?;
-    let dir = scratch()?;
+    let ctx = Ctx {
+        bin: release_binary()?,
+        dir: scratch()?,
+        committed: o.artifacts.clone().unwrap_or_else(root),
+        o,
+    };
     let mut stale = Vec::new();
-    for c in CHECKS.iter().filter(|c| chosen(c.name, o)) {
+    for c in CHECKS {
+        let steps_of: &dyn Fn(&Step) -> bool = match c.name {
+            "int8-blobs" => &|s: &Step| s.name.starts_with("int8-"),
+            "eval-prefixes" => &|s: &Step| s.args.first() == Some(&"eval"),
+            "curves" => &|s: &Step| s.args.first() == Some(&"train"),
+            _ => &|s: &Step| s.name == "size",
+        };
+        if !check_chosen(c, o, steps_of) {
+            continue;
+        }
         eprintln!("reproduce --check {}: {}", c.name, c.what);
         let found = match c.name {
-            "int8-blobs" => check_blobs(&bin, &dir)?,
-            "eval-prefixes" => check_eval_prefixes(&bin, &dir)?,
-            "size" => check_size(&dir)?,
-            "curves" => check_curves(&bin, &dir)?,
+            "int8-blobs" => check_blobs(&ctx)?,
+            "eval-prefixes" => check_eval_prefixes(&ctx)?,
+            "size" => check_size(&ctx)?,
+            "curves" => check_curves(&ctx)?,
             _ => unreachable!("every check has a body"),
         };
         stale.extend(found);
@@ -399,9 +453,13 @@ fn check(o: &Options) -> Result<()> {
     Ok(())
 }
 
-fn check_blobs(bin: &Path, dir: &Path) -> Result<Vec<String>> {
+fn check_blobs(ctx: &Ctx) -> Result<Vec<String>> {
+    let (bin, dir) = (&ctx.bin, &ctx.dir);
     let mut stale = Vec::new();
-    for s in STEPS.iter().filter(|s| s.name.starts_with("int8-")) {
+    for s in STEPS
+        .iter()
+        .filter(|s| s.name.starts_with("int8-") && ctx.step(s))
+    {
         let committed = s.args[s.args.len() - 1];
         let fresh = dir.join(format!("{}.q8", s.name));
         let mut args: Vec<&str> = s.args.to_vec();
@@ -409,7 +467,9 @@ fn check_blobs(bin: &Path, dir: &Path) -> Result<Vec<String>> {
         let fresh_str = fresh.to_string_lossy().into_owned();
         args[n - 1] = &fresh_str;
         super::run(Command::new(bin).args(&args).current_dir(root()))?;
-        if std::fs::read(root().join(committed))? != std::fs::read(&fresh)? {
+        let old = std::fs::read(ctx.committed.join(committed))
+            .with_context(|| format!("committed {committed}"))?;
+        if old != std::fs::read(&fresh)? {
             stale.push(format!("{committed} (step {})", s.name));
         }
     }
@@ -433,14 +493,18 @@ fn overridden(args: &[&str], with: &[(&str, &str)]) -> Vec<String> {
 /// Plans per committed evaluation that `--check` replays.
 pub const CHECK_PLANS: usize = 10;
 
-fn check_eval_prefixes(bin: &Path, dir: &Path) -> Result<Vec<String>> {
+fn check_eval_prefixes(ctx: &Ctx) -> Result<Vec<String>> {
+    let (bin, dir) = (&ctx.bin, &ctx.dir);
     let mut stale = Vec::new();
-    for s in STEPS.iter().filter(|s| s.args.first() == Some(&"eval")) {
+    for s in STEPS
+        .iter()
+        .filter(|s| s.args.first() == Some(&"eval") && ctx.step(s))
+    {
         if s.args.contains(&"--extra-measurements") {
             // results/extra keeps only per-budget aggregates, no per-episode records.
             continue;
         }
-        let committed = root().join(s.dir).join("results.json");
+        let committed = ctx.committed.join(s.dir).join("results.json");
         let Ok(text) = std::fs::read_to_string(&committed) else {
             stale.push(format!(
                 "{}/results.json is missing (step {})",
@@ -525,10 +589,14 @@ pub fn first_difference(committed: &str, fresh: &str) -> Result<Option<String>> 
 /// Updates of each committed training run that `--check` replays.
 pub const CHECK_UPDATES: u64 = 300;
 
-fn check_curves(bin: &Path, dir: &Path) -> Result<Vec<String>> {
+fn check_curves(ctx: &Ctx) -> Result<Vec<String>> {
+    let (bin, dir) = (&ctx.bin, &ctx.dir);
     let mut stale = Vec::new();
-    for s in STEPS.iter().filter(|s| s.args.first() == Some(&"train")) {
-        let committed = root().join(s.dir).join("log.csv");
+    for s in STEPS
+        .iter()
+        .filter(|s| s.args.first() == Some(&"train") && ctx.step(s))
+    {
+        let committed = ctx.committed.join(s.dir).join("log.csv");
         let Ok(text) = std::fs::read_to_string(&committed) else {
             stale.push(format!("{}/log.csv is missing (step {})", s.dir, s.name));
             continue;
@@ -581,8 +649,9 @@ pub fn first_curve_difference(committed: &str, fresh: &str) -> Option<String> {
     (rows == 0).then(|| "the replay logged no row".to_string())
 }
 
-fn check_size(dir: &Path) -> Result<Vec<String>> {
-    let committed = root().join("results/size.md");
+fn check_size(ctx: &Ctx) -> Result<Vec<String>> {
+    let dir = &ctx.dir;
+    let committed = ctx.committed.join("results/size.md");
     let fresh = dir.join("size.md");
     let exe = std::env::current_exe()?;
     super::run(
