@@ -83,14 +83,21 @@ pub fn measure(elf: &Path) -> Result<Sizes> {
     Ok(s)
 }
 
-/// Prints the table and fails when a budget is exceeded.
-pub fn report(elf: &Path) -> Result<()> {
+/// The size table of `elf` (what `cargo xtask size` prints and `results/size.md` holds), and
+/// the sizes it shows.
+pub fn table(elf: &Path) -> Result<(String, Sizes)> {
+    use std::fmt::Write as _;
     let s = measure(elf)?;
+    let mut out = String::new();
     // Relative to the workspace, so that the table is the same file on every checkout
     // (`results/size.md`, compared by `cargo xtask reproduce --check`).
     let shown = elf.strip_prefix(crate::root()).unwrap_or(elf);
-    println!("{}", shown.display());
-    println!("{:<16} {:>10} {:>9}  region", "section", "address", "bytes");
+    writeln!(out, "{}", shown.display())?;
+    writeln!(
+        out,
+        "{:<16} {:>10} {:>9}  region",
+        "section", "address", "bytes"
+    )?;
     for (name, addr, size, f, r) in &s.sections {
         let region = if *f {
             "FLASH"
@@ -99,25 +106,28 @@ pub fn report(elf: &Path) -> Result<()> {
         } else {
             "-"
         };
-        println!("{name:<16} {addr:#010x} {size:>9}  {region}");
+        writeln!(out, "{name:<16} {addr:#010x} {size:>9}  {region}")?;
     }
-    println!(
+    writeln!(
+        out,
         "flash: {} bytes ({:.1} KiB) of {} KiB budget",
         s.flash,
         s.flash as f64 / 1024.0,
         FLASH_BUDGET / 1024
-    );
-    println!(
+    )?;
+    writeln!(
+        out,
         "static RAM: {} bytes ({:.1} KiB) of {} KiB budget",
         s.ram,
         s.ram as f64 / 1024.0,
         RAM_BUDGET / 1024
-    );
+    )?;
     {
         use activesense_core::device::POLICY_SLOT_BYTES;
         use activesense_core::policy::{builtin, int8};
         let blobs = builtin::K1.len() + builtin::K10.len();
-        println!(
+        writeln!(
+            out,
             "of which the learnt policy: flash {} bytes (int8 blobs K = 1: {}, K = 10: {}); \
              RAM {} bytes (int8 activations {} + upload slot {})",
             blobs,
@@ -126,8 +136,15 @@ pub fn report(elf: &Path) -> Result<()> {
             int8::SCRATCH_BYTES + POLICY_SLOT_BYTES,
             int8::SCRATCH_BYTES,
             POLICY_SLOT_BYTES
-        );
+        )?;
     }
+    Ok((out, s))
+}
+
+/// Prints the table and fails when a budget is exceeded.
+pub fn report(elf: &Path) -> Result<()> {
+    let (text, s) = table(elf)?;
+    print!("{text}");
     if s.flash > FLASH_BUDGET {
         bail!("flash budget exceeded");
     }
