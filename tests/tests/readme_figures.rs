@@ -47,18 +47,24 @@ fn cells(line: &str) -> Vec<String> {
         .collect()
 }
 
-/// The rows (as cells) of the first table after `heading` in `text`, header and rule left out.
-fn table_after(text: &str, heading: &str) -> Vec<Vec<String>> {
+/// The rows (as cells) of the first table after `heading` in `text` whose header row starts
+/// with `header`, header and rule left out.
+fn table_at(text: &str, heading: &str, header: &str) -> Vec<Vec<String>> {
     let at = text
         .find(heading)
         .unwrap_or_else(|| panic!("no section {heading}"));
     text[at..]
         .lines()
-        .skip_while(|l| !l.starts_with("| agent"))
+        .skip_while(|l| !l.starts_with(header))
         .skip(2)
         .take_while(|l| l.starts_with('|'))
         .map(cells)
         .collect()
+}
+
+/// [`table_at`] for the usual `| agent | …` tables.
+fn table_after(text: &str, heading: &str) -> Vec<Vec<String>> {
+    table_at(text, heading, "| agent")
 }
 
 #[test]
@@ -235,13 +241,7 @@ fn the_greedy_confident_table_is_results_greedy_confident() {
     let at = readme
         .find("results/greedy-confident` (11 min) gives")
         .unwrap();
-    let rows: Vec<Vec<String>> = readme[at..]
-        .lines()
-        .skip_while(|l| !l.starts_with("| K |"))
-        .skip(2)
-        .take_while(|l| l.starts_with('|'))
-        .map(cells)
-        .collect();
+    let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| K |");
     assert_eq!(rows.len(), 2, "a K = 1 and a K = 10 row");
     for c in rows {
         let k: u64 = c[0].parse().unwrap();
@@ -270,13 +270,7 @@ fn the_ablation_table_is_results_ablations() {
     let mut checked = 0;
     let section = "## Ablations (paper §4.4)";
     let at = readme.find(section).unwrap();
-    let rows: Vec<Vec<String>> = readme[at..]
-        .lines()
-        .skip_while(|l| !l.starts_with("| policy |"))
-        .skip(2)
-        .take_while(|l| l.starts_with('|'))
-        .map(cells)
-        .collect();
+    let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| policy |");
     for c in rows {
         let k: u64 = c[1].parse().unwrap();
         let dir = match c[0].as_str() {
@@ -307,13 +301,7 @@ fn the_agreement_table_is_results_policy_agreement() {
     let readme = read("README.md");
     let runs = json("results/policy-agreement.json");
     let at = readme.find("## The int8 policy on the instrument").unwrap();
-    let rows: Vec<Vec<String>> = readme[at..]
-        .lines()
-        .skip_while(|l| !l.starts_with("| K |"))
-        .skip(2)
-        .take_while(|l| l.starts_with('|'))
-        .map(cells)
-        .collect();
+    let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| K |");
     assert_eq!(rows.len(), 2, "a K = 1 and a K = 10 row");
     for c in rows {
         let k: u64 = c[0].parse().unwrap();
@@ -356,13 +344,7 @@ fn the_fig4_table_is_the_committed_aggregates() {
     // from the "activation, measure / rotate" columns of docs/inspect/k{1,10}/aggregate.md.
     let readme = read("README.md");
     let at = readme.find("**Fig. 4 over 200 test plans**").unwrap();
-    let rows: Vec<Vec<String>> = readme[at..]
-        .lines()
-        .skip_while(|l| !l.starts_with("| distance from the visual centre"))
-        .skip(2)
-        .take_while(|l| l.starts_with('|'))
-        .map(cells)
-        .collect();
+    let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| distance from the visual centre");
     let aggregate = |k: u32| -> Vec<Vec<String>> {
         read(&format!("docs/inspect/k{k}/aggregate.md"))
             .lines()
