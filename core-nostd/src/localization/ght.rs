@@ -47,7 +47,7 @@ use serde::{Deserialize, Serialize};
 
 use super::grid::{self, CellIndex, GridSpec, Mode};
 use super::rtable::RTable;
-use super::vote::{vote_layer, EntropyAcc, QTAB_LEN};
+use super::vote::{vote_layer, vote_window, window_candidates, EntropyAcc, QTAB_LEN};
 pub use super::vote::{KERNEL_LEN, KERNEL_Q_MAX, VOTE_QUANTA};
 use super::{
     Confidence, LocError, LocalizerConfig, MAX_CELLS, MAX_LAYER_CELLS, MAX_RTABLE_POINTS,
@@ -123,6 +123,38 @@ pub struct GhtLocalizer {
     ready: bool,
     /// The fine argmax ([`GhtLocalizer::refine_argmax`]) and the update count it saw.
     fine: Option<(u32, CellIndex)>,
+    /// The coarse-to-fine argmax's running sums.
+    fine_sums: FineSums,
+}
+
+/// The coarse-to-fine argmax's sums ([`GhtLocalizer::refine_argmax`]) for the window
+/// around `centre`, over the first `readings` readings: 3 bins × [`FINE_SUB_BINS`]
+/// headings × 9 cells (1.7 KiB; a reading adds at most [`VOTE_QUANTA`] to a sum, so u16
+/// holds the longest episode).
+#[derive(Clone, Debug)]
+struct FineSums {
+    centre: Option<CellIndex>,
+    readings: u16,
+    /// Bits of the last reading summed.
+    last: (u32, u32),
+    sums: [[[u16; 9]; FINE_SUB_BINS as usize]; 3],
+}
+
+// Every reading of the longest episode fits a u16 sum.
+const _: () = assert!(crate::limits::MAX_OBSERVATIONS * VOTE_QUANTA as usize <= u16::MAX as usize);
+
+impl FineSums {
+    fn reset(&mut self, centre: CellIndex) {
+        *self = FineSums::EMPTY;
+        self.centre = Some(centre);
+    }
+
+    const EMPTY: FineSums = FineSums {
+        centre: None,
+        readings: 0,
+        last: (0, 0),
+        sums: [[[0; 9]; FINE_SUB_BINS as usize]; 3],
+    };
 }
 
 impl GhtLocalizer {
@@ -147,6 +179,7 @@ impl GhtLocalizer {
             updates: 0,
             ready: false,
             fine: None,
+            fine_sums: FineSums::EMPTY,
         }
     }
 
@@ -205,6 +238,7 @@ impl GhtLocalizer {
         self.total = 0.0;
         self.updates = 0;
         self.fine = None;
+        self.fine_sums = FineSums::EMPTY;
         self.z = self.normaliser();
     }
 
@@ -383,7 +417,106 @@ impl GhtLocalizer {
     /// next to the truth (docs/localization.md). Eight tracked headings fixed that in
     /// episodes but need 36 KB more RAM; the fine re-vote needs none (the scratch layer and
     /// 1.7 KB of stack) and costs `3 · FINE_SUB_BINS` windowed votes per reading.
+    ///
+    /// Incremental: the sums are per reading, so while the coarse argmax (the window) stays
+    /// where it was, only the readings added since the last call are voted
+    /// ([`FineSums`]); a moved window re-votes them all. Each windowed vote keeps only the
+    /// 3 × 3 window ([`vote_window`]). Both leave the result bit for bit what the full
+    /// re-vote gives (`fine_argmax_is_incremental_and_exact` in the tests); on the 20
+    /// mcu-bench episodes (heuristic-1, K = 10) the measurement update went from 10.6 M to
+    /// the figure in `results/mcu-bench/` (module docs of [`crate::registration::refine`]).
     pub fn refine_argmax(&mut self, readings: impl Iterator<Item = (f32, f32)> + Clone) {
+        self.fine = None;
+        if self.grid.rot_bins <= 1 {
+            return;
+        }
+        let Some(c0) = self.coarse_argmax() else {
+            return;
+        };
+        let mut cfg = self.cfg;
+        cfg.sub_bins = FINE_SUB_BINS;
+        let (nx, ny) = (self.grid.nx as i32, self.grid.ny as i32);
+        let (cx, cy) = (c0.ix as i32, c0.iy as i32);
+        let k = self.grid.rot_bins as i32;
+        let bins = [0i32, -1, 1].map(|d| (c0.bin as i32 + d).rem_euclid(k) as u8);
+        let sums = &mut self.fine_sums;
+        if sums.centre != Some(c0) {
+            sums.reset(c0);
+        }
+        let all = readings.clone();
+        let mut count = 0usize;
+        for (i, (bearing, range)) in readings.enumerate() {
+            count = i + 1;
+            if i < sums.readings as usize {
+                // The readings summed must still be the first ones (the last is checked).
+                if i + 1 == sums.readings as usize
+                    && (bearing.to_bits(), range.to_bits()) != sums.last
+                {
+                    self.fine_sums.reset(c0);
+                    return self.refine_argmax(all);
+                }
+                continue;
+            }
+            let mut cand = [0u16; MAX_RTABLE_POINTS];
+            let nc = window_candidates(&self.grid, &cfg, &self.rtable, range, (cx, cy), &mut cand);
+            for (b, &bin) in bins.iter().enumerate() {
+                for f in 0..FINE_SUB_BINS {
+                    let win = vote_window(
+                        &self.grid,
+                        &cfg,
+                        &self.rtable,
+                        &cand[..nc],
+                        &self.interior,
+                        &self.kernel,
+                        bin,
+                        f,
+                        bearing,
+                        range,
+                        (cx, cy),
+                    );
+                    for (sum, &v) in sums.sums[b][f as usize].iter_mut().zip(win.iter()) {
+                        // ≤ VOTE_QUANTA per reading: no overflow below 4096 readings.
+                        *sum = sum.saturating_add(v as u16);
+                    }
+                }
+            }
+            sums.readings = count as u16;
+            sums.last = (bearing.to_bits(), range.to_bits());
+        }
+        if count < sums.readings as usize {
+            self.fine_sums.reset(c0);
+            return self.refine_argmax(all);
+        }
+        let sums = &self.fine_sums;
+        let mut best = (0u32, c0);
+        for (b, &bin) in bins.iter().enumerate() {
+            for w in 0..9 {
+                let (x, y) = (cx + w as i32 % 3 - 1, cy + w as i32 / 3 - 1);
+                if x < 0 || y < 0 || x >= nx || y >= ny || !self.interior[(y * nx + x) as usize] {
+                    continue;
+                }
+                let v = sums.sums[b].iter().map(|h| h[w] as u32).max().unwrap_or(0);
+                let c = CellIndex {
+                    ix: x as u8,
+                    iy: y as u8,
+                    bin,
+                };
+                // The coarse argmax (first in this order) keeps ties.
+                if v > best.0 || (c == c0 && v == best.0) {
+                    best = (v, c);
+                }
+            }
+        }
+        self.fine = Some((self.updates, best.1));
+    }
+
+    /// The coarse-to-fine argmax as it was first written (every reading re-voted into a
+    /// full scratch layer): the reference the incremental one is tested against.
+    #[cfg(test)]
+    pub(crate) fn refine_argmax_reference(
+        &mut self,
+        readings: impl Iterator<Item = (f32, f32)> + Clone,
+    ) {
         self.fine = None;
         if self.grid.rot_bins <= 1 {
             return;

@@ -595,3 +595,51 @@ fn fine_argmax_corrects_heading_quantisation() {
         "fine {fine_right} vs coarse {coarse_right} of 40"
     );
 }
+
+/// The incremental, windowed coarse-to-fine argmax (refined after every reading, as the
+/// pipeline does) picks the same cell as the full re-vote of every reading, at every step,
+/// outliers included.
+#[test]
+fn fine_argmax_is_incremental_and_exact() {
+    let p = l_room();
+    let cfg = LocalizerConfig::default();
+    let mut l = boxed(&p, &cfg);
+    let mut reference = boxed(&p, &cfg);
+    let mut rng = Pcg32::seed_from_u64(77);
+    let (mut compared, mut episodes) = (0, 0);
+    while episodes < 12 {
+        let a = v2(
+            -3.5 + 7.0 * uniform(&mut rng),
+            -2.5 + 5.0 * uniform(&mut rng),
+        );
+        if !p.contains(a) {
+            continue;
+        }
+        episodes += 1;
+        let truth = Pose2::new(a.x, a.y, TAU * uniform(&mut rng));
+        l.clear();
+        reference.clear();
+        let mut readings: Vec<(f32, f32)> = Vec::new();
+        let mut k = 0;
+        while readings.len() < 14 && k < 54 * 5 {
+            if let Some((b, r)) = measure(&p, &truth, k) {
+                // Every fifth reading an outlier.
+                let r = if readings.len() % 5 == 3 { 0.5 * r } else { r };
+                l.update(b, r).unwrap();
+                reference.update(b, r).unwrap();
+                readings.push((b, r));
+                l.refine_argmax(readings.iter().copied());
+                reference.refine_argmax_reference(readings.iter().copied());
+                assert_eq!(
+                    l.argmax(),
+                    reference.argmax(),
+                    "after {} readings",
+                    readings.len()
+                );
+                compared += 1;
+            }
+            k += 11;
+        }
+    }
+    assert!(compared > 100, "{compared}");
+}

@@ -6,7 +6,7 @@ use super::grid::GridSpec;
 use super::rtable::RTable;
 use super::{LocalizerConfig, MAX_LAYER_CELLS};
 use crate::world::geometry::{unit, Vec2};
-use crate::world::math::{cos, ln};
+use crate::world::math::{cos, ln, sqrt};
 
 /// Vote quantum: a measurement adds `round(w·VOTE_QUANTA)` (`w ∈ [0, 1]`) to a slot.
 pub const VOTE_QUANTA: u8 = 16;
@@ -62,6 +62,141 @@ impl EntropyAcc {
             (ln(self.z) - self.s / self.z).max(0.0)
         }
     }
+}
+
+/// [`vote_layer`] with a window, for one heading `sub` of `bin`, keeping only the 3 × 3
+/// window cells centred on `(wx, wy)` (row-major, `0` outside the grid): the same votes and
+/// the same kernel values, without filling or touching the rest of a layer. The
+/// coarse-to-fine argmax runs 96 of these per reading; filling a 900-cell layer for each
+/// cost more than the votes that reach the window.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn vote_window(
+    grid: &GridSpec,
+    cfg: &LocalizerConfig,
+    rtable: &RTable,
+    candidates: &[u16],
+    interior: &[bool; MAX_LAYER_CELLS],
+    kernel: &[u8; KERNEL_LEN],
+    bin: u8,
+    s: u8,
+    bearing: f32,
+    range: f32,
+    (wx, wy): (i32, i32),
+) -> [u8; 9] {
+    let mut win = [0u8; 9];
+    let nx = grid.nx as i32;
+    let ny = grid.ny as i32;
+    let (cw, ch) = (grid.cell[0], grid.cell[1]);
+    let (inv_w, inv_h) = (1.0 / cw, 1.0 / ch);
+    let (x0, y0) = (grid.origin[0], grid.origin[1]);
+    let sg = 0.5 * cw.max(ch);
+    let sub = cfg.effective_sub_bins();
+    if s >= sub {
+        return win;
+    }
+    let delta = if grid.rot_bins > 1 {
+        grid.bin_width() / sub as f32
+    } else {
+        0.0
+    };
+    let rd = range * delta;
+    let k_par = 0.5 / (sg * sg + cfg.range_sigma * cfg.range_sigma);
+    let k_perp = 0.5 / (sg * sg + rd * rd / 12.0);
+    let cos_min = cos(cfg.max_incidence);
+    let spread = cfg.spread as i32;
+    let h = if grid.rot_bins > 1 {
+        bin as f32 * grid.bin_width() - 0.5 * grid.bin_width() + (s as f32 + 0.5) * delta
+    } else {
+        grid.known_heading
+    };
+    let u: Vec2 = unit(h + bearing);
+    let (ux, uy) = (u.x, u.y);
+    let (ox, oy) = (range * ux, range * uy);
+    let points = rtable.points();
+    for p in candidates.iter().filter_map(|&i| points.get(i as usize)) {
+        if ux * p.n[0] + uy * p.n[1] < cos_min {
+            continue;
+        }
+        let ax = p.m[0] - ox;
+        let ay = p.m[1] - oy;
+        let fx = (ax - x0) * inv_w;
+        let fy = (ay - y0) * inv_h;
+        if !(fx >= 0.0 && fy >= 0.0 && fx < nx as f32 && fy < ny as f32) {
+            continue;
+        }
+        let (cx, cy) = (fx as i32, fy as i32);
+        if (cx - wx).abs() > spread + 1 || (cy - wy).abs() > spread + 1 {
+            continue;
+        }
+        if !interior[(cy * nx + cx) as usize] {
+            continue;
+        }
+        // The neighbourhood of `vote_layer`, cut to the window.
+        let (ylo, yhi) = (
+            (cy - spread).max(0).max(wy - 1),
+            (cy + spread).min(ny - 1).min(wy + 1),
+        );
+        let (xlo, xhi) = (
+            (cx - spread).max(0).max(wx - 1),
+            (cx + spread).min(nx - 1).min(wx + 1),
+        );
+        for jy in ylo..=yhi {
+            let dy = y0 + (jy as f32 + 0.5) * ch - ay;
+            for jx in xlo..=xhi {
+                let idx = (jy * nx + jx) as usize;
+                if !interior[idx] {
+                    continue;
+                }
+                let dx = x0 + (jx as f32 + 0.5) * cw - ax;
+                let par = dx * ux + dy * uy;
+                let perp = ux * dy - uy * dx;
+                let q = par * par * k_par + perp * perp * k_perp;
+                let k = (q * KERNEL_SCALE + 0.5) as usize;
+                if let Some(&wq) = kernel.get(k) {
+                    let w = ((jy - wy + 1) * 3 + (jx - wx + 1)) as usize;
+                    if wq > win[w] {
+                        win[w] = wq;
+                    }
+                }
+            }
+        }
+    }
+    win
+}
+
+/// The R-table entries that can vote into the window of [`vote_window`] around `(wx, wy)`
+/// for a reading of `range` at any heading: a vote lands at `m − r·u`, so `m` must lie
+/// within the window's reach (its cells ± `spread + 1`, as a disc) of a circle of radius
+/// `r` around the window. Conservative (a centimetre of slack beyond the disc), so the
+/// windowed votes over the candidates are exactly those over the whole table; returns how
+/// many were written to `out`.
+pub(super) fn window_candidates(
+    grid: &GridSpec,
+    cfg: &LocalizerConfig,
+    rtable: &RTable,
+    range: f32,
+    (wx, wy): (i32, i32),
+    out: &mut [u16],
+) -> usize {
+    let (cw, ch) = (grid.cell[0], grid.cell[1]);
+    let reach = cfg.spread as f32 + 1.5;
+    let c = (
+        grid.origin[0] + (wx as f32 + 0.5) * cw,
+        grid.origin[1] + (wy as f32 + 0.5) * ch,
+    );
+    let radius = sqrt(reach * cw * reach * cw + reach * ch * reach * ch) + 0.01 + 1e-4 * range;
+    let (lo, hi) = ((range - radius).max(0.0), range + radius);
+    let (lo2, hi2) = (lo * lo, hi * hi);
+    let mut n = 0;
+    for (i, p) in rtable.points().iter().enumerate() {
+        let (dx, dy) = (p.m[0] - c.0, p.m[1] - c.1);
+        let d2 = dx * dx + dy * dy;
+        if d2 >= lo2 && d2 <= hi2 && n < out.len() {
+            out[n] = i as u16;
+            n += 1;
+        }
+    }
+    n
 }
 
 /// Algorithms 1 and 2 for one rotation bin: fills `scratch` (one layer) with the

@@ -4,6 +4,7 @@
 //! in [`crate::registration`].
 
 use super::*;
+use crate::limits::MAX_VERTICES;
 
 /// Acceleration: smallest cosine between consecutive ICP steps that counts as "the same
 /// direction".
@@ -217,6 +218,10 @@ struct Pair {
 }
 
 type Pairs = HVec<Pair, MAX_OBSERVATIONS>;
+/// TEMP profile counters.
+pub static PROFILE_MATCH: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+/// TEMP
+pub static PROFILE_PAIRS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 
 /// Correspondence for one observation at AgentPose `pose`: the nearest point on a feasible
 /// wall (facing the ray, incidence within `cos_max`, visible from the instrument), else the
@@ -225,43 +230,53 @@ fn correspond(plan: &FloorPlan, o: &ObsPoint, pose: &Pose2, cos_max: f32, relaxe
     let origin = pose.translation(); // the instrument, in the model frame
     let p = pose.transform(o.s);
     let d = pose.rotate_dir(o.d);
-    let n = plan.len();
-    let mut any: Option<(Vec2, f32)> = None;
-    // Walls found hidden from the instrument (a plan has at most 64 walls).
-    let mut hidden: u64 = 0;
-    loop {
-        let mut best: Option<(usize, Vec2, f32, f32)> = None;
-        for i in 0..n {
+    let n = plan.len().min(MAX_VERTICES);
+    // The walls facing the ray within the incidence limit, with their nearest points, in
+    // wall order; the correspondent is the nearest of them that is visible (the first on
+    // equal distances), else the nearest point of any wall. Written as one pass over the
+    // walls and then visibility tests in order of distance (a wall's facing does not
+    // depend on `p`): the same pairs as scanning every wall again after each hidden one.
+    let mut feasible = [(0.0f32, v2(0.0, 0.0), 0.0f32); MAX_VERTICES];
+    let mut nf = 0usize;
+    for i in 0..n {
+        let nrm = plan.outward_normal(i);
+        let c = d.x * nrm.x + d.y * nrm.y;
+        if c > 0.0 && c >= cos_max {
             let (a, b) = plan.wall(i);
             let q = closest_on_segment(p, a, b);
-            let dist = length(p - q);
-            if any.is_none_or(|(_, e)| dist < e) {
-                any = Some((q, dist));
-            }
-            if hidden & (1u64 << i) != 0 {
-                continue;
-            }
-            let nrm = plan.outward_normal(i);
-            let c = d.x * nrm.x + d.y * nrm.y;
-            if c > 0.0 && c >= cos_max && best.is_none_or(|(_, _, e, _)| dist < e) {
-                best = Some((i, q, dist, c));
+            feasible[nf] = (length(p - q), q, c);
+            nf += 1;
+        }
+    }
+    let mut tried: u64 = 0;
+    loop {
+        let mut best: Option<usize> = None;
+        for (k, f) in feasible[..nf].iter().enumerate() {
+            if tried & (1u64 << k) == 0 && best.is_none_or(|b| f.0 < feasible[b].0) {
+                best = Some(k);
             }
         }
-        match best {
-            Some((i, m, dist, c)) => {
-                if plan.visible(origin, m, VISIBILITY_TOLERANCE) {
-                    return Pair {
-                        m,
-                        s: o.s,
-                        dist,
-                        weight: c,
-                        relaxed: false,
-                        inlier: true,
-                    };
-                }
-                hidden |= 1u64 << i;
-            }
-            None => break,
+        let Some(k) = best else { break };
+        let (dist, m, c) = feasible[k];
+        if plan.visible(origin, m, VISIBILITY_TOLERANCE) {
+            return Pair {
+                m,
+                s: o.s,
+                dist,
+                weight: c,
+                relaxed: false,
+                inlier: true,
+            };
+        }
+        tried |= 1u64 << k;
+    }
+    let mut any: Option<(Vec2, f32)> = None;
+    for i in 0..n {
+        let (a, b) = plan.wall(i);
+        let q = closest_on_segment(p, a, b);
+        let dist = length(p - q);
+        if any.is_none_or(|(_, e)| dist < e) {
+            any = Some((q, dist));
         }
     }
     match any {
@@ -293,6 +308,8 @@ fn match_pairs(
     params: &IcpParams,
     pairs: &mut Pairs,
 ) -> ErrorSummary {
+    PROFILE_MATCH.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+    PROFILE_PAIRS.fetch_add(obs.len() as u32, core::sync::atomic::Ordering::Relaxed);
     pairs.clear();
     let cos_max = cos(params.max_incidence);
     for (i, o) in obs.pts.iter().enumerate() {

@@ -380,10 +380,32 @@ impl FloorPlan {
         if dist <= tolerance {
             return true;
         }
-        match self.ray_cast(from, d / dist) {
-            Some(hit) => hit.range >= dist - tolerance,
+        match self.first_hit(from, d / dist) {
+            Some(range) => range >= dist - tolerance,
             None => true,
         }
+    }
+
+    /// The range of [`FloorPlan::ray_cast`]'s hit alone (the same arithmetic, without the
+    /// incidence angle and hit point): the visibility test of every ICP correspondence
+    /// needs no more.
+    fn first_hit(&self, origin: Vec2, dir: Vec2) -> Option<f32> {
+        let mut best: Option<f32> = None;
+        for i in 0..self.len() {
+            let (a, b) = self.wall(i);
+            let e = b - a;
+            let denom = cross(dir, e);
+            if abs(denom) < 1e-12 {
+                continue; // parallel
+            }
+            let w = a - origin;
+            let t = cross(w, e) / denom; // along the ray
+            let u = cross(w, dir) / denom; // along the wall
+            if t > 1e-6 && (0.0..=1.0).contains(&u) && best.is_none_or(|h| t < h) {
+                best = Some(t);
+            }
+        }
+        best
     }
 
     /// The topological scan (paper §3.1, §4.1): `N` binary pixels spanning `fov` radians
