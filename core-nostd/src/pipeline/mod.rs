@@ -56,6 +56,10 @@ pub const MIN_MEASUREMENTS_UNKNOWN_HEADING: usize = 3;
 /// Heading starts of the registration sweep when the heading is unknown.
 pub const REGISTRATION_STARTS: u8 = 9;
 
+/// ICP iterations per sweep start in the refinement
+/// ([`crate::registration::refine::RefineInput::sweep_iterations`]).
+pub const SWEEP_ITERATIONS: u16 = 8;
+
 /// Why [`Pipeline::start`] refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum PipelineError {
@@ -231,11 +235,7 @@ impl Pipeline {
         let stop = match self.params.termination {
             Termination::Confident => {
                 let risk = self.stop_gate().and_then(|_| {
-                    // Keep the refinement the rule is about to need, for `finish` as well.
-                    let key = self.refinement_key();
-                    if self.last_refinement.is_none_or(|(k, _)| k != key) {
-                        self.last_refinement = self.refine(&self.plan).ok().map(|r| (key, r));
-                    }
+                    self.track_refinement();
                     let risk = self.stop_risk_estimate()?;
                     self.remember_if_best(risk);
                     Some(risk)
@@ -248,7 +248,15 @@ impl Pipeline {
                 .ground_truth
                 .filter(|t| self.localizer.coarse_success(t, self.order))
                 .map(|_| Stop::CoarseSuccess)?,
-            Termination::ActionLimit => return None,
+            Termination::ActionLimit => {
+                // No stop, but the same refinements as under the confident rule, so that
+                // what the calibration sees there ([`Pipeline::stop_point`]) is what the
+                // rule will see.
+                if self.stop_gate().is_some() {
+                    self.track_refinement();
+                }
+                return None;
+            }
         };
         if self.params.config.min_observability > 0.0
             && self
@@ -258,6 +266,27 @@ impl Pipeline {
             return None;
         }
         Some(stop)
+    }
+
+    /// Brings the kept refinement up to the readings: carried on from the previous
+    /// reading's ([`refine::refine_after`]) when there is one, else from scratch. Past the
+    /// stop gate this runs after every reading; the carry is what keeps a reading's update
+    /// cheap on the instrument (issue 22).
+    fn track_refinement(&mut self) {
+        let key = self.refinement_key();
+        if self.last_refinement.is_some_and(|(k, _)| k == key) {
+            return;
+        }
+        let previous = self
+            .last_refinement
+            .filter(|((n, _), _)| n + 1 == self.observations.len())
+            .map(|(_, r)| r);
+        let input = self.refine_input(&self.plan);
+        let refined = match previous {
+            Some(p) => refine::refine_after(&input, &p),
+            None => refine::refine(&input),
+        };
+        self.last_refinement = refined.ok().map(|r| (key, r));
     }
 
     /// Keeps the current moment as the episode's answer when its estimated risk is the
@@ -515,7 +544,13 @@ impl Pipeline {
                 return Ok(r);
             }
         }
-        refine::refine(&RefineInput {
+        refine::refine(&self.refine_input(plan))
+    }
+
+    /// What [`Pipeline::refine`] hands the refinement (readings, belief, parameters); the
+    /// search is [`refine::refine_with`]'s to choose (tests and benches compare them).
+    pub fn refine_input<'a>(&'a self, plan: &'a FloorPlan) -> RefineInput<'a> {
+        RefineInput {
             plan,
             obs: &self.observations,
             localizer: &self.localizer,
@@ -525,7 +560,8 @@ impl Pipeline {
             starts: REGISTRATION_STARTS,
             unknowns: self.min_measurements(),
             model: RangeModel::default(),
-        })
+            sweep_iterations: SWEEP_ITERATIONS,
+        }
     }
 
     /// What a refinement depends on besides the plan and the parameters fixed at

@@ -129,11 +129,13 @@ pub fn range_fit(
     let peak = (1.0 - model.outlier_prob.clamp(0.0, 1.0)) / (sigma * sqrt(TAU));
     let (mut log_likelihood, mut explained) = (0.0f32, 0u16);
     let (mut bearings, mut explained_bearings) = (0u16, 0u16);
+    let (sin_h, cos_h) = (sin(pose.theta), cos(pose.theta));
+    let rot = |v: Vec2| v2(cos_h * v.x - sin_h * v.y, sin_h * v.x + cos_h * v.y);
     // Whether reading i was explained (for the per-bearing counts).
     let mut ok = [false; MAX_OBSERVATIONS];
     for (i, p) in obs.pts.iter().enumerate() {
         let measured = length(p.s);
-        let predicted = plan.ray_cast(a, rotate(p.d, pose.theta)).map(|h| h.range);
+        let predicted = plan.first_hit(a, rot(p.d));
         let density = match predicted {
             Some(r) => {
                 let z = (measured - r) / sigma;
@@ -164,6 +166,49 @@ pub fn range_fit(
         bearings,
         explained_bearings,
     }
+}
+
+/// The readings `pose` leaves unexplained (range residual beyond 3σ of [`RangeModel`], or a
+/// ray that meets no wall), worst first (ties: the earlier reading), skipping `skip`: the
+/// refinement's candidates for leaving out. At most `N`.
+pub fn unexplained_readings<const N: usize>(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    model: &RangeModel,
+    skip: &[u16],
+) -> HVec<u16, N> {
+    let a = pose.translation();
+    let sigma = model.sigma.max(1e-6);
+    let mut worst: HVec<(f32, u16), N> = HVec::new();
+    let (sin_h, cos_h) = (sin(pose.theta), cos(pose.theta));
+    let rot = |v: Vec2| v2(cos_h * v.x - sin_h * v.y, sin_h * v.x + cos_h * v.y);
+    for (i, p) in obs.pts.iter().enumerate() {
+        if skip.contains(&(i as u16)) {
+            continue;
+        }
+        let z = match plan.first_hit(a, rot(p.d)) {
+            Some(r) => abs((length(p.s) - r) / sigma),
+            None => f32::INFINITY,
+        };
+        // A NaN residual fails the test: unexplained.
+        if z <= 3.0 {
+            continue;
+        }
+        let z = if z.is_nan() { f32::INFINITY } else { z };
+        // Insertion into the short, worst-first list.
+        let at = worst
+            .iter()
+            .position(|&(w, _)| z > w)
+            .unwrap_or(worst.len());
+        if at < N {
+            if worst.len() == N {
+                worst.pop();
+            }
+            let _ = worst.insert(at, (z, i as u16));
+        }
+    }
+    worst.iter().map(|&(_, i)| i).collect()
 }
 
 /// Smallest eigenvalue of the symmetric `[[a, b], [b, c]]`.

@@ -218,33 +218,46 @@ struct Pair {
 }
 
 type Pairs = HVec<Pair, MAX_OBSERVATIONS>;
-/// TEMP profile counters.
-pub static PROFILE_MATCH: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
-/// TEMP
-pub static PROFILE_PAIRS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 
 /// Correspondence for one observation at AgentPose `pose`: the nearest point on a feasible
 /// wall (facing the ray, incidence within `cos_max`, visible from the instrument), else the
 /// plain nearest point with weight `relaxed_w`.
-fn correspond(plan: &FloorPlan, o: &ObsPoint, pose: &Pose2, cos_max: f32, relaxed_w: f32) -> Pair {
+fn correspond(
+    plan: &FloorPlan,
+    o: &ObsPoint,
+    pose: &Pose2,
+    (sin_h, cos_h): (f32, f32),
+    cos_max: f32,
+    relaxed_w: f32,
+) -> Pair {
     let origin = pose.translation(); // the instrument, in the model frame
-    let p = pose.transform(o.s);
-    let d = pose.rotate_dir(o.d);
+                                     // `pose.transform(o.s)` and `pose.rotate_dir(o.d)` with the heading's sine and cosine
+                                     // taken once per pose (libm's are software routines on the M4F; the same bits).
+    let rot = |v: Vec2| v2(cos_h * v.x - sin_h * v.y, sin_h * v.x + cos_h * v.y);
+    let p = rot(o.s) + origin;
+    let d = rot(o.d);
     let n = plan.len().min(MAX_VERTICES);
     // The walls facing the ray within the incidence limit, with their nearest points, in
     // wall order; the correspondent is the nearest of them that is visible (the first on
     // equal distances), else the nearest point of any wall. Written as one pass over the
     // walls and then visibility tests in order of distance (a wall's facing does not
     // depend on `p`): the same pairs as scanning every wall again after each hidden one.
-    let mut feasible = [(0.0f32, v2(0.0, 0.0), 0.0f32); MAX_VERTICES];
+    //
+    // Distances are compared squared and the facing test is made on the unnormalised
+    // normal: on the M4F, libm's `sqrtf` is a software routine, and two of them per wall
+    // were most of a correspondence's cost. The square root is taken for the chosen wall.
+    let mut feasible = [(0.0f32, v2(0.0, 0.0), 0u8); MAX_VERTICES];
     let mut nf = 0usize;
+    let cos2 = cos_max * cos_max;
     for i in 0..n {
-        let nrm = plan.outward_normal(i);
-        let c = d.x * nrm.x + d.y * nrm.y;
-        if c > 0.0 && c >= cos_max {
-            let (a, b) = plan.wall(i);
+        let (a, b) = plan.wall(i);
+        let e = b - a;
+        // d · (outward normal × |e|), the normal being `e` turned right.
+        let c = d.x * e.y - d.y * e.x;
+        if c > 0.0 && (cos_max <= 0.0 || c * c >= cos2 * (e.x * e.x + e.y * e.y)) {
             let q = closest_on_segment(p, a, b);
-            feasible[nf] = (length(p - q), q, c);
+            let r = p - q;
+            feasible[nf] = (r.x * r.x + r.y * r.y, q, i as u8);
             nf += 1;
         }
     }
@@ -257,13 +270,14 @@ fn correspond(plan: &FloorPlan, o: &ObsPoint, pose: &Pose2, cos_max: f32, relaxe
             }
         }
         let Some(k) = best else { break };
-        let (dist, m, c) = feasible[k];
+        let (d2, m, i) = feasible[k];
         if plan.visible(origin, m, VISIBILITY_TOLERANCE) {
+            let nrm = plan.outward_normal(i as usize);
             return Pair {
                 m,
                 s: o.s,
-                dist,
-                weight: c,
+                dist: sqrt(d2),
+                weight: d.x * nrm.x + d.y * nrm.y,
                 relaxed: false,
                 inlier: true,
             };
@@ -274,11 +288,13 @@ fn correspond(plan: &FloorPlan, o: &ObsPoint, pose: &Pose2, cos_max: f32, relaxe
     for i in 0..n {
         let (a, b) = plan.wall(i);
         let q = closest_on_segment(p, a, b);
-        let dist = length(p - q);
-        if any.is_none_or(|(_, e)| dist < e) {
-            any = Some((q, dist));
+        let r = p - q;
+        let d2 = r.x * r.x + r.y * r.y;
+        if any.is_none_or(|(_, e)| d2 < e) {
+            any = Some((q, d2));
         }
     }
+    let any = any.map(|(q, d2)| (q, sqrt(d2)));
     match any {
         Some((m, dist)) => Pair {
             m,
@@ -308,16 +324,22 @@ fn match_pairs(
     params: &IcpParams,
     pairs: &mut Pairs,
 ) -> ErrorSummary {
-    PROFILE_MATCH.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-    PROFILE_PAIRS.fetch_add(obs.len() as u32, core::sync::atomic::Ordering::Relaxed);
     pairs.clear();
     let cos_max = cos(params.max_incidence);
+    let sc = (sin(pose.theta), cos(pose.theta));
     for (i, o) in obs.pts.iter().enumerate() {
         if params.excludes(i) {
             continue;
         }
         // Same capacity as the observation set.
-        let _ = pairs.push(correspond(plan, o, pose, cos_max, params.relaxed_weight));
+        let _ = pairs.push(correspond(
+            plan,
+            o,
+            pose,
+            sc,
+            cos_max,
+            params.relaxed_weight,
+        ));
     }
     let n = pairs.len();
     // Percentile threshold on the distances.
@@ -445,7 +467,7 @@ pub fn sparse_icp(
 }
 
 /// True when `p` lies in the trust region of `params` around `centre`.
-fn in_trust_region(p: &Pose2, centre: &Pose2, params: &IcpParams) -> bool {
+pub(crate) fn in_trust_region(p: &Pose2, centre: &Pose2, params: &IcpParams) -> bool {
     length(p.translation() - centre.translation()) <= params.trust_translation
         && abs(wrap_angle(p.theta - centre.theta)) <= params.trust_rotation
 }
@@ -608,6 +630,21 @@ pub fn register_multistart(
     heading_span: f32,
     starts: u8,
 ) -> Result<Registration, RegistrationError> {
+    register_multistart_capped(plan, obs, initial, params, heading_span, starts, u16::MAX)
+}
+
+/// [`register_multistart`] with each sweep start's ICP cut at `sweep_iterations` (the
+/// sweep only picks the start of the annealing; issue 22 measured most of the
+/// refinement's cost in sweep ICPs run to a 10 µm tolerance).
+pub fn register_multistart_capped(
+    plan: &FloorPlan,
+    obs: &Observations,
+    initial: &Pose2,
+    params: &AnnealParams,
+    heading_span: f32,
+    starts: u8,
+    sweep_iterations: u16,
+) -> Result<Registration, RegistrationError> {
     if starts <= 1 || params.icp.fixed_heading || !(heading_span > 0.0 && heading_span.is_finite())
     {
         return register(plan, obs, initial, params);
@@ -617,10 +654,14 @@ pub fn register_multistart(
     // part) then runs once, from the best of them.
     let mut pairs = Pairs::new();
     let mut best: Option<(Pose2, f32)> = None;
+    let sweep = IcpParams {
+        max_iterations: params.icp.max_iterations.min(sweep_iterations),
+        ..params.icp
+    };
     for k in 0..starts {
         let offset = -heading_span + 2.0 * heading_span * (k as f32 + 0.5) / starts as f32;
         let start = Pose2::new(initial.x, initial.y, initial.theta + offset);
-        let r = icp_inner(plan, obs, &start, initial, &params.icp, &mut pairs);
+        let r = icp_inner(plan, obs, &start, initial, &sweep, &mut pairs);
         let pose = if in_trust_region(&r.pose, initial, &params.icp) {
             r.pose
         } else {
@@ -635,8 +676,9 @@ pub fn register_multistart(
     register_centred(plan, obs, &start, initial, params)
 }
 
-/// [`register`] from `initial`, with the trust region centred on `centre`.
-fn register_centred(
+/// [`register`] from `initial`, with the trust region centred on `centre` (the refinement
+/// starts its final annealing from the screened winner, inside the belief's trust region).
+pub fn register_centred(
     plan: &FloorPlan,
     obs: &Observations,
     initial: &Pose2,
@@ -926,7 +968,14 @@ mod tests {
             s: v2(2.05, 0.0),
             d: v2(-1.0, 0.0),
         };
-        let pr = correspond(&r, &o, &Pose2::IDENTITY, cos_max, params.relaxed_weight);
+        let pr = correspond(
+            &r,
+            &o,
+            &Pose2::IDENTITY,
+            (0.0, 1.0),
+            cos_max,
+            params.relaxed_weight,
+        );
         assert!(
             !pr.relaxed && (pr.m - v2(-2.0, 0.0)).norm() < 1e-6,
             "{pr:?}"
@@ -937,7 +986,14 @@ mod tests {
             s: v2(1.9, 0.3),
             d: unit(PI / 3.0),
         };
-        let pr = correspond(&r, &o, &Pose2::IDENTITY, cos_max, params.relaxed_weight);
+        let pr = correspond(
+            &r,
+            &o,
+            &Pose2::IDENTITY,
+            (0.0, 1.0),
+            cos_max,
+            params.relaxed_weight,
+        );
         assert!(!pr.relaxed && (pr.m - v2(2.0, 0.3)).norm() < 1e-6, "{pr:?}");
         assert!((pr.weight - 0.5).abs() < 1e-5);
         // Instrument outside the room at (10, 0) looking at -x, observation mapped to
@@ -948,7 +1004,14 @@ mod tests {
             s: v2(-8.1, 0.0),
             d: v2(-1.0, 0.0),
         };
-        let pr = correspond(&r, &o, &pose, cos_max, params.relaxed_weight);
+        let pr = correspond(
+            &r,
+            &o,
+            &pose,
+            (sin(pose.theta), cos(pose.theta)),
+            cos_max,
+            params.relaxed_weight,
+        );
         assert!(pr.relaxed && pr.weight == params.relaxed_weight, "{pr:?}");
         assert!((pr.m - v2(2.0, 0.0)).norm() < 1e-5 && (pr.dist - 0.1).abs() < 1e-5);
         // L-room, instrument in the lower arm: the nearest wall to the observation is the
@@ -984,7 +1047,14 @@ mod tests {
             s: obs_pt - inst,
             d: dir,
         };
-        let pr = correspond(&l, &o, &pose, cos_max, params.relaxed_weight);
+        let pr = correspond(
+            &l,
+            &o,
+            &pose,
+            (sin(pose.theta), cos(pose.theta)),
+            cos_max,
+            params.relaxed_weight,
+        );
         assert!(!pr.relaxed, "{pr:?}");
         assert!((pr.m - (v2(3.0, 2.0) - c)).norm() < 1e-4, "{pr:?}");
         // Seen from the upper arm instead, the top wall is visible and matched.
@@ -995,7 +1065,14 @@ mod tests {
             s: obs_pt - inst,
             d: dir,
         };
-        let pr = correspond(&l, &o, &pose, cos_max, params.relaxed_weight);
+        let pr = correspond(
+            &l,
+            &o,
+            &pose,
+            (sin(pose.theta), cos(pose.theta)),
+            cos_max,
+            params.relaxed_weight,
+        );
         assert!(
             !pr.relaxed && (pr.m - (v2(2.5, 4.0) - c)).norm() < 1e-4,
             "{pr:?}"

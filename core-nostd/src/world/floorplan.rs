@@ -389,7 +389,7 @@ impl FloorPlan {
     /// The range of [`FloorPlan::ray_cast`]'s hit alone (the same arithmetic, without the
     /// incidence angle and hit point): the visibility test of every ICP correspondence
     /// needs no more.
-    fn first_hit(&self, origin: Vec2, dir: Vec2) -> Option<f32> {
+    pub fn first_hit(&self, origin: Vec2, dir: Vec2) -> Option<f32> {
         let mut best: Option<f32> = None;
         for i in 0..self.len() {
             let (a, b) = self.wall(i);

@@ -679,6 +679,48 @@ pub fn mcu_bench_table(rows: &[McuBenchRow]) -> String {
     s
 }
 
+/// Issue 22's targets for every on-device event (measurement update with whatever the stop
+/// needs, rotation, no-return, end of episode): mean and worst guest instructions.
+pub const EVENT_TARGET_MEAN: f64 = 8e6;
+/// See [`EVENT_TARGET_MEAN`].
+pub const EVENT_TARGET_MAX: u64 = 40_000_000;
+
+/// One line: whether every event of every row meets [`EVENT_TARGET_MEAN`] and
+/// [`EVENT_TARGET_MAX`], naming the events that do not.
+pub fn mcu_bench_targets(rows: &[McuBenchRow]) -> String {
+    let mut missed = Vec::new();
+    for r in rows {
+        for (name, st) in [
+            ("measurement update", &r.vote),
+            ("rotation update", &r.rotation),
+            ("no-return update", &r.no_return),
+            ("end of episode", &r.finish),
+        ] {
+            if st.count > 0 && (st.mean() > EVENT_TARGET_MEAN || st.max > EVENT_TARGET_MAX) {
+                missed.push(format!(
+                    "K={} {name} {:.1} M / {:.1} M",
+                    r.rot_bins,
+                    st.mean() / 1e6,
+                    st.max as f64 / 1e6
+                ));
+            }
+        }
+    }
+    let target = format!(
+        "every event mean ≤ {:.0} M and worst ≤ {:.0} M instructions (issue 22)",
+        EVENT_TARGET_MEAN / 1e6,
+        EVENT_TARGET_MAX as f64 / 1e6
+    );
+    if missed.is_empty() {
+        format!("Targets met: {target}.\n")
+    } else {
+        format!(
+            "Targets NOT met: {target}; missed: {}.\n",
+            missed.join(", ")
+        )
+    }
+}
+
 /// `activesense mcu-bench`.
 pub fn cmd_mcu_bench(a: McuBenchArgs) -> Result<()> {
     let t0 = Instant::now();
@@ -694,6 +736,7 @@ pub fn cmd_mcu_bench(a: McuBenchArgs) -> Result<()> {
         a.episode_seed
     );
     print!("{}", mcu_bench_table(&rows));
+    print!("\n{}", mcu_bench_targets(&rows));
     eprintln!("mcu-bench: {:.1} s", t0.elapsed().as_secs_f64());
     Ok(())
 }
