@@ -25,7 +25,9 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
     // A policy uploaded into the firmware's RAM slot serves bit-identically; bad uploads
     // are refused with the uploaded policy still serving.
     activesense_tests::policy_upload_suite(&mut l.client);
-    let out = l.close().expect("firmware shuts down with exit status 0");
+    let out = l
+        .shutdown()
+        .expect("firmware shuts down with exit status 0");
     assert!(out.contains("core initialised"), "{out}");
     assert!(out.contains("activesense-firmware: shutdown"), "{out}");
 }

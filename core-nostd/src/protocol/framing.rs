@@ -22,6 +22,17 @@ pub enum FrameError {
     Decode,
 }
 
+impl core::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            FrameError::TooLarge => "frame too large",
+            FrameError::Framing => "not a valid COBS frame",
+            FrameError::Crc => "CRC mismatch",
+            FrameError::Decode => "not a valid message",
+        })
+    }
+}
+
 impl FrameError {
     /// The [`WireError`] the device answers a bad frame with.
     pub fn to_wire(self) -> WireError {

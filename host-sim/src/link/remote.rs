@@ -12,6 +12,7 @@ use crate::episode::{
     parse_agent, parse_observability, parse_stop_risk, parse_termination, EpisodeSpec,
 };
 use crate::link::device::{sim_episode, SimInstrument};
+use crate::link::error::LinkError;
 use crate::link::serial::{self, EpisodeRun, Link, LinkSpec};
 use crate::world::plans::TEST_SEEDS;
 use crate::world::sensor::SensorModel;
@@ -60,12 +61,18 @@ pub struct RemoteEpisodeArgs {
     /// to the instrument, which applies it; docs/EVALUATION.md, "Observability").
     #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
     pub min_observability: f32,
-    /// Reply timeout in milliseconds.
-    #[arg(long, default_value_t = 5000)]
-    pub timeout_ms: u64,
+    /// Reply time-out in milliseconds. Default: what the device announces as its slowest
+    /// reply (its `Hello`), plus half again; a request without a reply in time is re-sent.
+    #[arg(long)]
+    pub timeout_ms: Option<u64>,
     /// Replay every episode in-process and require bit-identical results.
     #[arg(long)]
     pub verify: bool,
+    /// Power the instrument off at the end (protocol `Shutdown`; the firmware exits).
+    /// Without it the session ends and the instrument keeps serving: a policy uploaded to
+    /// its RAM stays. (A `loopback` or `qemu` device this command started ends with it.)
+    #[arg(long)]
+    pub shutdown: bool,
 }
 
 /// `activesense sim`.
@@ -112,6 +119,23 @@ pub enum SerialCommand {
     List,
     /// Load a plan file into the instrument controller and run episodes in that room.
     Run(SerialRunArgs),
+    /// Power the instrument off (protocol `Shutdown`; the firmware exits). Every other
+    /// command leaves it serving.
+    Shutdown(SerialShutdownArgs),
+}
+
+/// `activesense serial shutdown`.
+#[derive(Args, Debug)]
+pub struct SerialShutdownArgs {
+    /// Serial device (e.g. /dev/ttyUSB0).
+    #[arg(long)]
+    pub port: String,
+    /// Baud rate.
+    #[arg(long, default_value_t = serial::DEFAULT_BAUD)]
+    pub baud: u32,
+    /// Reply time-out in milliseconds (default: as announced by the device).
+    #[arg(long)]
+    pub timeout_ms: Option<u64>,
 }
 
 /// `activesense serial run`.
@@ -324,18 +348,68 @@ fn print_totals(t: &Totals, secs: f64) {
     }
 }
 
-fn run_one(
+/// Most times one episode is restarted from its seeds after the link lost it.
+pub const MAX_RESTARTS: u32 = 3;
+
+/// True for failures after which the episode can be run again from its seeds: the line
+/// lost or garbled frames beyond the client's re-sends, or the device dropped the session
+/// (it abandons an episode whose host went silent). A refusal of the plan or the
+/// parameters would only repeat, and a closed or broken link cannot be retried.
+fn restartable(e: &LinkError) -> bool {
+    use activesense_core::protocol::WireError as W;
+    match e {
+        LinkError::Timeout | LinkError::GaveUp { .. } | LinkError::BadFrame(_) => true,
+        LinkError::Unexpected(_) => true,
+        LinkError::Device(w) => matches!(
+            w,
+            W::NoSession
+                | W::OutOfSequence { .. }
+                | W::StepMismatch { .. }
+                | W::UnexpectedRequest
+                | W::Framing
+                | W::Crc
+                | W::Decode
+                | W::Oversized
+        ),
+        _ => false,
+    }
+}
+
+/// An episode's plan, parameters and simulated instrument, built from its seeds: calling
+/// it again gives the same episode (a restart, the `--verify` reference).
+pub type EpisodeMaker<'a> = &'a dyn Fn() -> (FloorPlan, EpisodeParams, SimInstrument);
+
+/// Runs one episode on the device; after a restartable link failure ([`restartable`]) it
+/// re-opens the session and runs the episode again from its seeds (same seeds, same
+/// actions), at most [`MAX_RESTARTS`] times, counting them in `restarts`.
+pub fn run_one(
     link: &mut Link,
-    plan: &FloorPlan,
-    params: &EpisodeParams,
-    mut inst: SimInstrument,
-    reference: Option<(FloorPlan, EpisodeParams, SimInstrument)>,
+    mk: EpisodeMaker<'_>,
+    verify: bool,
+    restarts: &mut u32,
 ) -> Result<EpisodeRun> {
-    link.client.load_plan(plan).context("loading the plan")?;
-    let run = link
-        .client
-        .run_episode(params, &mut inst)
-        .context("running the episode")?;
+    let mut attempt = 0;
+    let run = loop {
+        let (plan, params, mut inst) = mk();
+        let r = link
+            .client
+            .load_plan(&plan)
+            .and_then(|_| link.client.run_episode(&params, &mut inst));
+        match r {
+            Ok(run) => break run,
+            Err(e) if attempt < MAX_RESTARTS && restartable(&e) => {
+                attempt += 1;
+                *restarts += 1;
+                eprintln!(
+                    "warning: {e}; restarting the episode from its seeds ({attempt} of {MAX_RESTARTS})"
+                );
+                link.client
+                    .hello()
+                    .context("re-opening the session for a restart")?;
+            }
+            Err(e) => return Err(e).context("running the episode"),
+        }
+    };
     if run.trace_hash() != run.report.trace_hash {
         bail!(
             "trace fingerprint mismatch: host {:08x}, device {:08x}",
@@ -343,7 +417,8 @@ fn run_one(
             run.report.trace_hash
         );
     }
-    if let Some((p, prm, mut i)) = reference {
+    if verify {
+        let (p, prm, mut i) = mk();
         let local = reference_run(&p, &prm, &mut i)?;
         if !same_run(&run, &local) {
             bail!("device run differs from the in-process run");
@@ -352,11 +427,41 @@ fn run_one(
     Ok(run)
 }
 
+/// Opens `spec`; `--timeout-ms`, when given, fixes the reply time-out, else it follows
+/// the device's announcement.
+fn open_link(spec: &LinkSpec, qemu_args: &[String], timeout_ms: Option<u64>) -> Result<Link> {
+    let floor = timeout_ms.map_or(serial::HANDSHAKE_TIMEOUT, Duration::from_millis);
+    let mut link = serial::open_with_qemu_args(spec, floor, qemu_args)
+        .with_context(|| format!("opening {spec}"))?;
+    if timeout_ms.is_some() {
+        link.client.set_reply_timeout(floor, false);
+    }
+    Ok(link)
+}
+
+/// The host's side of the link summary: what it took to get the frames through.
+fn print_link_counters(link: &Link, restarts: u32) {
+    println!(
+        "link (host): {}, {} episode restarts; reply time-out {} ms",
+        link.client.counters().summary(),
+        restarts,
+        link.client.reply_timeout().as_millis()
+    );
+}
+
+/// Ends a command's session: `Shutdown` with `--shutdown`, else leave the device serving.
+fn end_session(link: Link, shutdown: bool) -> Result<(String, Vec<u8>)> {
+    if shutdown {
+        link.shutdown_with_stderr()
+            .context("shutting the device down")
+    } else {
+        link.close_with_stderr().context("closing the link")
+    }
+}
+
 /// `activesense sim`.
 pub fn cmd_sim(a: SimArgs) -> Result<()> {
-    let timeout = Duration::from_millis(a.episode.timeout_ms);
-    let mut link = serial::open_with_qemu_args(&a.link, timeout, &a.qemu_args)
-        .with_context(|| format!("opening {:?}", a.link))?;
+    let mut link = open_link(&a.link, &a.qemu_args, a.episode.timeout_ms)?;
     let info = link.client.hello().context("handshake")?;
     println!(
         "device: {} (protocol v{}, capabilities {:#x}, max {} vertices, max {} actions)",
@@ -388,11 +493,16 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
             v
         }
     };
+    let mut restarts = 0;
     for (label, spec) in &specs {
-        let (plan, params, inst) = sim_episode(spec);
-        let reference = a.episode.verify.then(|| sim_episode(spec));
-        let run = run_one(&mut link, &plan, &params, inst, reference)
-            .with_context(|| format!("episode on {label}"))?;
+        let run = run_one(
+            &mut link,
+            &|| sim_episode(spec),
+            a.episode.verify,
+            &mut restarts,
+        )
+        .with_context(|| format!("episode on {label}"))?;
+        let (plan, params, _) = sim_episode(spec);
         print_run(label, &run, &plan, &params, &mut t);
     }
     let status = link.client.status().context("status")?;
@@ -408,10 +518,9 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
             ""
         }
     );
+    print_link_counters(&link, restarts);
     print_totals(&t, start.elapsed().as_secs_f64());
-    let (out, raw) = link
-        .close_with_stderr()
-        .context("shutting the device down")?;
+    let (out, raw) = end_session(link, a.episode.shutdown)?;
     if let Some(path) = &a.defmt_out {
         std::fs::write(path, &raw).with_context(|| format!("writing {}", path.display()))?;
     }
@@ -454,8 +563,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                 path: r.port.clone(),
                 baud: r.baud,
             };
-            let timeout = Duration::from_millis(r.episode.timeout_ms);
-            let mut link = serial::open(&spec, timeout)?;
+            let mut link = open_link(&spec, &[], r.episode.timeout_ms)?;
             let info = link
                 .client
                 .hello()
@@ -463,6 +571,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             println!("device: {} (protocol v{})", info.firmware, info.protocol);
             let mut t = Totals::default();
             let start = Instant::now();
+            let mut restarts = 0;
             for i in 0..r.episode.episodes {
                 let spec = spec_for(0, &r.episode)?;
                 let world_seed = spec.world_seed() ^ i as u64;
@@ -475,14 +584,35 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                     params.seed ^= i as u64;
                     (plan.clone(), params, SimInstrument::new(world))
                 };
-                let (p, params, inst) = mk();
-                let reference = r.episode.verify.then(mk);
-                let run = run_one(&mut link, &p, &params, inst, reference)
+                let run = run_one(&mut link, &mk, r.episode.verify, &mut restarts)
                     .with_context(|| format!("episode {i} on {}", r.port))?;
+                let (p, params, _) = mk();
                 print_run(&format!("episode {i}"), &run, &p, &params, &mut t);
             }
+            if r.episode.verify {
+                println!(
+                    "every episode verified bit-identical to the in-process run ({} episodes)",
+                    t.episodes
+                );
+            }
+            print_link_counters(&link, restarts);
             print_totals(&t, start.elapsed().as_secs_f64());
-            // A real instrument keeps running: no Shutdown, just leave the session.
+            // The instrument keeps serving unless --shutdown.
+            end_session(link, r.episode.shutdown)?;
+            Ok(())
+        }
+        SerialCommand::Shutdown(s) => {
+            let spec = LinkSpec::Serial {
+                path: s.port.clone(),
+                baud: s.baud,
+            };
+            let mut link = open_link(&spec, &[], s.timeout_ms)?;
+            let info = link
+                .client
+                .hello()
+                .with_context(|| format!("handshake on {}", s.port))?;
+            link.shutdown().context("shutting the device down")?;
+            println!("{} on {}: shut down", info.firmware, s.port);
             Ok(())
         }
     }
@@ -616,8 +746,9 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
             termination: a.termination,
             stop_risk: activesense_core::limits::DEFAULT_STOP_RISK,
             min_observability: 0.0,
-            timeout_ms: a.timeout_ms,
+            timeout_ms: Some(a.timeout_ms),
             verify: false,
+            shutdown: false,
         };
         let mut row = McuBenchRow {
             rot_bins,
@@ -625,9 +756,13 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
         };
         for i in 0..a.episodes {
             let seed = a.first_seed.wrapping_add(i);
-            let (plan, params, inst) = sim_episode(&spec_for(seed, &ep)?);
-            let run = run_one(&mut link, &plan, &params, inst, None)
+            let spec = spec_for(seed, &ep)?;
+            let mut restarts = 0;
+            let run = run_one(&mut link, &|| sim_episode(&spec), false, &mut restarts)
                 .with_context(|| format!("K = {rot_bins}, episode on plan {seed}"))?;
+            if restarts > 0 {
+                bail!("K = {rot_bins}, plan {seed}: the link lost the episode (restarted)");
+            }
             let c = run.report.cycles;
             row.episodes += 1;
             row.vote.add(&c.vote);
@@ -638,7 +773,8 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
         }
         rows.push(row);
     }
-    let out = link.close().context("shutting the device down")?;
+    // The emulator this command started ends with it.
+    let out = link.close().context("stopping the emulator")?;
     if !out.contains("core initialised") {
         bail!("unexpected firmware console output: {out}");
     }
