@@ -9,7 +9,7 @@
 //! and fails unless actions, observations and report are bit-identical.
 
 use crate::episode::{
-    parse_agent, parse_observability, parse_stop_risk, parse_termination, EpisodeSpec,
+    parse_agent, parse_observability, parse_stop_risk, termination_parser, EpisodeSpec,
 };
 use crate::link::device::{sim_episode, SimInstrument};
 use crate::link::error::LinkError;
@@ -49,17 +49,17 @@ pub struct RemoteEpisodeArgs {
     pub episode_seed: u64,
     /// When the device stops an episode: on coarse success against the simulated ground
     /// truth (oracle, the paper's rule), when its belief is confident, or at the action limit.
-    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
     pub termination: activesense_core::episode::Termination,
     /// With --termination confident: stop only once the estimated probability that the
     /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
     /// 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
     pub stop_risk: f32,
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax must reach this (0 = off; sent
     /// to the instrument, which applies it; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
     pub min_observability: f32,
     /// Reply time-out in milliseconds. Default: what the device announces as its slowest
     /// reply (its `Hello`), plus half again; a request without a reply in time is re-sent.
@@ -638,7 +638,7 @@ pub struct McuBenchArgs {
     #[arg(long, default_value_t = 0)]
     pub episode_seed: u64,
     /// When the device stops an episode (see `sim --termination`).
-    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
     pub termination: activesense_core::episode::Termination,
     /// Reply timeout in milliseconds.
     #[arg(long, default_value_t = 60_000)]
