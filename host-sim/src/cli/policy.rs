@@ -4,11 +4,11 @@
 
 use super::write_file;
 use crate::learn::agent::Policies;
+use crate::link::runner::open_link;
 use crate::link::serial::{self, LinkSpec};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 #[derive(Args)]
 pub struct QuantizeArgs {
@@ -198,7 +198,7 @@ pub fn upload(a: PolicyUploadArgs) -> Result<()> {
             )
         })?
         .rot_bins();
-    let mut link = open_link(&a.link, a.timeout_ms)?;
+    let mut link = open_link(&a.link, &[], a.timeout_ms)?;
     let info = link.client.hello().context("handshake")?;
     if info.capabilities & activesense_core::protocol::CAP_POLICY_UPLOAD == 0 {
         bail!(
@@ -219,23 +219,13 @@ pub fn upload(a: PolicyUploadArgs) -> Result<()> {
 
 /// Prints which policy serves K = 1 and K = 10 on the instrument.
 pub fn info(a: PolicyInfoArgs) -> Result<()> {
-    let mut link = open_link(&a.link, a.timeout_ms)?;
+    let mut link = open_link(&a.link, &[], a.timeout_ms)?;
     let info = link.client.hello().context("handshake")?;
     println!("device: {} (protocol v{})", info.firmware, info.protocol);
     for k in [1u8, 10] {
         print_policy(&link.client.policy_info(k)?);
     }
     end_session(link, a.shutdown)
-}
-
-/// Opens the link; `--timeout-ms` fixes the reply time-out, else it follows the device.
-fn open_link(spec: &LinkSpec, timeout_ms: Option<u64>) -> Result<serial::Link> {
-    let floor = timeout_ms.map_or(serial::HANDSHAKE_TIMEOUT, Duration::from_millis);
-    let mut link = serial::open(spec, floor).with_context(|| format!("opening {spec}"))?;
-    if timeout_ms.is_some() {
-        link.client.set_reply_timeout(floor, false);
-    }
-    Ok(link)
 }
 
 /// `Shutdown` with `--shutdown`; else the session ends and the instrument keeps serving
