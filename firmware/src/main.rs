@@ -113,9 +113,16 @@ unsafe fn DefaultHandler(irqn: i16) {
     }
 }
 
+/// The longest one request may take on this firmware (ms), announced in `Hello`: the
+/// slowest update measured by `cargo xtask mcu-bench` (1.64e9 instructions, a vote past the
+/// calibrated stop's gate at K = 10: 9.8 s at 168 MHz and one instruction per cycle, and
+/// about as long under QEMU's `-icount shift=0`), doubled.
+const MAX_REPLY_MS: u32 = 20_000;
+
 const CONFIG: SessionConfig = SessionConfig {
     firmware: concat!("activesense-fw ", env!("CARGO_PKG_VERSION")),
     timeout_ms: DEFAULT_TIMEOUT_MS,
+    max_reply_ms: MAX_REPLY_MS,
     cycle_clock: Some(cycles),
     policies: &activesense_core::policy::builtin::POLICIES,
 };

@@ -26,6 +26,7 @@ fuzz_target!(|data: &[u8]| {
     let mut s = Box::new(Session::new(SessionConfig {
         firmware: "fuzz",
         timeout_ms: 50,
+        max_reply_ms: 1000,
         cycle_clock: None,
         // The firmware's policies: learnt-int8 episodes and uploads are fuzzed too.
         policies: &activesense_core::policy::builtin::POLICIES,

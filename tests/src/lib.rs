@@ -391,6 +391,24 @@ pub fn firmware_elf() -> PathBuf {
     root.join(activesense_sim::link::serial::DEFAULT_ELF)
 }
 
+/// The `activesense` CLI binary, built here with `cargo build -p activesense-sim --bin
+/// activesense` (a no-op when up to date): the tests that need a *second process* (the
+/// device must keep serving between commands) run it.
+pub fn activesense_bin() -> PathBuf {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = std::process::Command::new(cargo)
+        .current_dir(&root)
+        .args(["build", "-p", "activesense-sim", "--bin", "activesense"])
+        .status()
+        .expect("run cargo to build the CLI");
+    assert!(status.success(), "building the CLI failed");
+    let target = std::env::var("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| root.join("target"));
+    target.join("debug").join("activesense")
+}
+
 /// Runs one learnt-int8 episode on the device and checks its actions against the host
 /// playing `blob` (bit-identical).
 fn learnt_episode_matches<T: Read + Write>(client: &mut Client<T>, seed_index: u32, blob: &[u8]) {

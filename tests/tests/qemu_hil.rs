@@ -25,9 +25,99 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
     // A policy uploaded into the firmware's RAM slot serves bit-identically; bad uploads
     // are refused with the uploaded policy still serving.
     activesense_tests::policy_upload_suite(&mut l.client);
-    let out = l.close().expect("firmware shuts down with exit status 0");
+    let out = l
+        .shutdown()
+        .expect("firmware shuts down with exit status 0");
     assert!(out.contains("core initialised"), "{out}");
     assert!(out.contains("activesense-firmware: shutdown"), "{out}");
+}
+
+/// An instrument the user started keeps serving between commands: `policy upload` in one
+/// process, then `policy info` in a second process shows the uploaded policy (in the
+/// firmware's RAM), and only `--shutdown` powers it off (exit status 0).
+#[test]
+fn qemu_policy_upload_then_info_in_a_second_process() {
+    use activesense_sim::link::device::qemu_binary;
+    use activesense_sim::link::qemu_cmd::{qemu_command, QemuSerial};
+    use std::process::{Command, Stdio};
+    let elf = firmware_elf();
+    let cli = activesense_tests::activesense_bin();
+    let dir = std::env::temp_dir().join(format!("activesense-hil-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let blob_path = dir.join("other-k1.q8");
+    let blob = activesense_tests::other_k1_blob();
+    std::fs::write(&blob_path, &blob).unwrap();
+    let crc = activesense_core::policy::int8::stored_crc(&blob).unwrap();
+    // A free port for QEMU to listen on (USART1 as a TCP server, as a user would run it).
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut qemu = qemu_command(&qemu_binary(), &elf, QemuSerial::TcpServer(port))
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start qemu");
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(std::time::Instant::now() < deadline, "qemu did not listen");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let link = format!("tcp:127.0.0.1:{port}");
+    let run = |args: &[&str]| {
+        let out = Command::new(&cli)
+            .args(args)
+            .output()
+            .expect("run activesense");
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.status.success(), "activesense {args:?}: {text}");
+        text
+    };
+    let up = run(&[
+        "policy",
+        "upload",
+        "--link",
+        &link,
+        "--int8",
+        blob_path.to_str().unwrap(),
+    ]);
+    let uploaded = format!("K =  1: Uploaded ({} bytes, crc {crc:08x})", blob.len());
+    assert!(up.contains(&uploaded), "{up}");
+    // A second process: the device kept serving, with the uploaded policy in its RAM.
+    let info = run(&["policy", "info", "--link", &link]);
+    assert!(info.contains(&uploaded), "{info}");
+    assert!(info.contains("K = 10: BuiltIn"), "{info}");
+    assert!(
+        qemu.try_wait().unwrap().is_none(),
+        "the firmware exited without --shutdown"
+    );
+    // Only --shutdown powers it off.
+    run(&["policy", "info", "--link", &link, "--shutdown"]);
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    let status = loop {
+        if let Some(s) = qemu.try_wait().unwrap() {
+            break s;
+        }
+        if std::time::Instant::now() > deadline {
+            let _ = qemu.kill();
+            panic!("the firmware did not stop after --shutdown");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut console = String::new();
+    std::io::Read::read_to_string(&mut qemu.stdout.take().unwrap(), &mut console).unwrap();
+    assert!(status.success(), "{status}: {console}");
+    assert!(
+        console.contains("activesense-firmware: shutdown"),
+        "{console}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `mcu-bench`: under `-icount shift=0` the firmware's TIM2 counts executed instructions,

@@ -22,6 +22,10 @@ pub struct SessionConfig {
     pub firmware: &'static str,
     /// Silence (ms) after which a running episode is abandoned.
     pub timeout_ms: u32,
+    /// Announced in `Hello` as [`DeviceInfo::max_reply_ms`]: an upper bound on the time one
+    /// request takes to answer on this device (its slowest update), so the host's reply
+    /// time-out follows the device instead of a fixed guess.
+    pub max_reply_ms: u32,
     /// Free-running cycle counter for per-update statistics.
     pub cycle_clock: Option<fn() -> u32>,
     /// int8 policy blobs built into the firmware (`docs/policy-blob.md`), one per K; each
@@ -158,6 +162,7 @@ impl Session {
             scan_pixels: SCAN_PIXELS as u8,
             max_frame: MAX_FRAME as u16,
             capabilities,
+            max_reply_ms: self.config.max_reply_ms,
         }
     }
 
@@ -218,7 +223,23 @@ impl Session {
         false
     }
 
+    /// Sends a reply that is not kept for retransmission (errors to frames or requests
+    /// that were not taken into the sequence).
     fn send<W: Write>(&mut self, id: u16, msg: &Response, out: &mut W) -> Result<(), W::Error> {
+        self.send_reply(id, msg, false, out)
+    }
+
+    /// Sends a reply; with `cache`, it is kept so a re-sent request with the same id gets
+    /// it again. Every request taken into the sequence caches its reply, errors included:
+    /// a host whose copy of a refusal was corrupted on the line re-sends the request and
+    /// must get the same refusal, not `OutOfSequence` (protocol v6).
+    fn send_reply<W: Write>(
+        &mut self,
+        id: u16,
+        msg: &Response,
+        cache: bool,
+        out: &mut W,
+    ) -> Result<(), W::Error> {
         let mut buf = [0u8; MAX_REPLY];
         // Every Response fits MAX_REPLY (asserted by a unit test over the largest ones);
         // a failure here would be a programming error, reported as a bare Decode error.
@@ -226,7 +247,7 @@ impl Session {
             Ok(n) => n,
             Err(_) => encode_frame(id, &Response::Error(WireError::Decode), &mut buf).unwrap_or(0),
         };
-        if id != NO_ID && !matches!(msg, Response::Error(_)) {
+        if cache && id != NO_ID {
             self.reply[..n].copy_from_slice(&buf[..n]);
             self.reply_len = n;
         }
@@ -292,7 +313,7 @@ impl Session {
             self.open = true;
             self.event(SessionEvent::Opened);
             let info = self.device_info();
-            self.send(id, &Response::Hello(info), out)?;
+            self.send_reply(id, &Response::Hello(info), true, out)?;
             return Ok(Control::Continue);
         }
         if !self.open {
@@ -349,7 +370,7 @@ impl Session {
         if let Response::Error(WireError::StepMismatch { .. }) = resp {
             self.stats.sequence_errors = self.stats.sequence_errors.saturating_add(1);
         }
-        self.send(id, &resp, out)?;
+        self.send_reply(id, &resp, true, out)?;
         Ok(control)
     }
 
@@ -503,6 +524,7 @@ mod tests {
     const CFG: SessionConfig = SessionConfig {
         firmware: "test",
         timeout_ms: 1000,
+        max_reply_ms: 1000,
         cycle_clock: None,
         policies: &[],
     };
@@ -909,6 +931,35 @@ mod tests {
                 device: PROTOCOL_VERSION
             })
         );
+    }
+
+    /// A refusal is cached like any reply (protocol v6): the host that lost it on a noisy
+    /// line re-sends the same id and gets the same error, not `OutOfSequence`, and nothing
+    /// is done twice; an out-of-sequence id still gets no cached reply.
+    #[test]
+    fn refusals_are_retransmitted() {
+        let mut s = session_with_square();
+        let mut p = params(5);
+        p.rot_bins = 1;
+        p.known_heading = None;
+        let refused = Response::Error(WireError::InvalidParams(ParamError::KnownHeadingRequired));
+        assert_eq!(call(&mut s, 3, &Request::StartEpisode(p)), refused);
+        assert_eq!(call(&mut s, 3, &Request::StartEpisode(p)), refused);
+        assert_eq!(s.stats().retransmissions, 1);
+        // The next request proceeds in sequence; a repeat of it replays its reply only.
+        let act = call(&mut s, 4, &Request::StartEpisode(params(5)));
+        assert!(matches!(act, Response::Act { step: 0, .. }), "{act:?}");
+        assert_eq!(call(&mut s, 4, &Request::StartEpisode(params(5))), act);
+        assert_eq!(s.controller().episode_actions(), 0);
+        assert_eq!(
+            call(&mut s, 9, &Request::Status),
+            Response::Error(WireError::OutOfSequence { expected: 5 })
+        );
+        assert!(matches!(
+            call(&mut s, 5, &Request::Status),
+            Response::Status(_)
+        ));
+        assert_eq!(s.phase(), Phase::Episode);
     }
 
     #[test]

@@ -49,6 +49,17 @@ pub enum ObservationError {
     ScanBits,
 }
 
+impl core::fmt::Display for ObservationError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            ObservationError::NonFiniteRange => "the range is NaN or infinite",
+            ObservationError::NegativeRange => "the range is negative",
+            ObservationError::RangeOnRotation => "a rotation reported a range",
+            ObservationError::ScanBits => "scan bits beyond the scan's pixels are set",
+        })
+    }
+}
+
 impl Observation {
     /// Checks an instrument answer to `action`: no scan bits beyond [`SCAN_PIXELS`], a
     /// range only after a measurement, and then finite and not negative.

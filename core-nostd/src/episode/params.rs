@@ -76,6 +76,28 @@ pub enum ParamError {
     InvalidObservability,
 }
 
+impl core::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            ParamError::StepsPerTurn => "steps per turn must be 1..=3600",
+            ParamError::MaxActions => "the action limit is 0 or above the device's maximum",
+            ParamError::RotBins => "rotation bins out of the localizer's range",
+            ParamError::KnownHeadingRequired => "K = 1 needs the known heading",
+            ParamError::NonFinite => "known heading or ground truth is NaN or infinite",
+            ParamError::GroundTruthOutside => "the ground-truth position lies outside the plan",
+            ParamError::GroundTruthRequired => "oracle termination needs a ground truth",
+            ParamError::PlanNotLocalizable => {
+                "the localizer cannot take this plan (not centred, or too much perimeter)"
+            }
+            ParamError::AgentUnavailable => "this agent does not run on the device",
+            ParamError::InvalidStopRisk => "stop risk must be finite, above 0 and at most 1",
+            ParamError::InvalidObservability => {
+                "minimum observability must be finite and within 0..=1"
+            }
+        })
+    }
+}
+
 /// Parameters of one episode (besides the plan).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EpisodeParams {

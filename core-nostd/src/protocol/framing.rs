@@ -22,6 +22,17 @@ pub enum FrameError {
     Decode,
 }
 
+impl core::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            FrameError::TooLarge => "frame too large",
+            FrameError::Framing => "not a valid COBS frame",
+            FrameError::Crc => "CRC mismatch",
+            FrameError::Decode => "not a valid message",
+        })
+    }
+}
+
 impl FrameError {
     /// The [`WireError`] the device answers a bad frame with.
     pub fn to_wire(self) -> WireError {
@@ -300,6 +311,46 @@ mod tests {
         assert_eq!(
             decode_frame::<Request>(&mut f[..48]).unwrap(),
             (42, Request::StartEpisode(episode_params()))
+        );
+    }
+
+    /// Protocol v6: `DeviceInfo` ends with `max_reply_ms` (a varint), byte for byte.
+    #[test]
+    fn hello_reply_bytes_are_protocol_v6() {
+        use crate::protocol::{DeviceInfo, GridInfo, Response};
+        let mut firmware = heapless::String::new();
+        firmware.push_str("fw").unwrap();
+        let info = DeviceInfo {
+            protocol: 6,
+            firmware,
+            grid: GridInfo {
+                cells_x: 30,
+                cells_y: 30,
+                cell_mm: 0,
+            },
+            max_vertices: 64,
+            max_actions: 500,
+            max_rot_bins: 10,
+            scan_pixels: 20,
+            max_frame: MAX_FRAME as u16,
+            capabilities: 0xFF,
+            max_reply_ms: 20_000,
+        };
+        let mut raw = [0u8; 64];
+        let body = postcard::to_slice(&(0u16, Response::Hello(info.clone())), &mut raw).unwrap();
+        // ... capabilities 0xFF (varint FF 01), then max_reply_ms 20000 (varint A0 9C 01).
+        assert_eq!(&body[body.len() - 5..], &[0xFF, 0x01, 0xA0, 0x9C, 0x01]);
+        const V6_HELLO: [u8; 27] = [
+            1, 1, 7, 6, 2, 102, 119, 30, 30, 17, 64, 244, 3, 10, 20, 237, 7, 255, 1, 160, 156, 1,
+            147, 178, 202, 218, 0,
+        ];
+        let mut out = [0u8; MAX_FRAME];
+        let n = encode_frame(0, &Response::Hello(info.clone()), &mut out).unwrap();
+        assert_eq!(out[..n], V6_HELLO);
+        let mut f = V6_HELLO;
+        assert_eq!(
+            decode_frame::<Response>(&mut f[..n - 1]).unwrap(),
+            (0, Response::Hello(info))
         );
     }
 

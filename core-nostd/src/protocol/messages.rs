@@ -176,6 +176,32 @@ pub enum PolicyError {
     NoUpload,
 }
 
+impl core::fmt::Display for PolicyError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            PolicyError::TooLarge { capacity } => write!(
+                f,
+                "larger than the device's {capacity}-byte slot (or K out of range)"
+            ),
+            PolicyError::ChunkOffset { expected } => {
+                write!(f, "chunk out of order (device expected offset {expected})")
+            }
+            PolicyError::Overrun => f.write_str("more bytes than announced"),
+            PolicyError::Incomplete { received } => {
+                write!(f, "commit after only {received} bytes")
+            }
+            PolicyError::Checksum => f.write_str("the bytes do not have the announced CRC-32"),
+            PolicyError::Invalid(e) => write!(f, "not a valid int8 policy: {e}"),
+            PolicyError::WrongRotBins { found } => {
+                write!(f, "the blob is for K = {found}, not the announced K")
+            }
+            PolicyError::NoUpload => {
+                f.write_str("no upload in progress (an episode started since cancels it)")
+            }
+        }
+    }
+}
+
 /// Static description of the device, sent in answer to `Hello`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DeviceInfo {
@@ -197,6 +223,10 @@ pub struct DeviceInfo {
     pub max_frame: u16,
     /// `CAP_*` bits.
     pub capabilities: u32,
+    /// The longest the device may take to answer one request (ms): its slowest update
+    /// (the calibrated stop's end-of-episode chain at K = 10). The host waits this long
+    /// (plus a margin) before it re-sends a request. Since protocol v6.
+    pub max_reply_ms: u32,
 }
 
 /// The localizer's accumulator grid dimensions.
@@ -433,9 +463,9 @@ impl core::fmt::Display for WireError {
             }
             WireError::InvalidPlan(e) => write!(f, "invalid floor-plan: {e}"),
             WireError::NoPlan => write!(f, "no floor-plan loaded"),
-            WireError::InvalidParams(e) => write!(f, "invalid episode parameters: {e:?}"),
-            WireError::InvalidObservation(e) => write!(f, "invalid observation: {e:?}"),
-            WireError::Policy(e) => write!(f, "policy upload refused: {e:?}"),
+            WireError::InvalidParams(e) => write!(f, "invalid episode parameters: {e}"),
+            WireError::InvalidObservation(e) => write!(f, "invalid observation: {e}"),
+            WireError::Policy(e) => write!(f, "policy upload refused: {e}"),
         }
     }
 }

@@ -3,8 +3,8 @@
 
 use super::{write_file, SensorArgs};
 use crate::episode::{
-    parse_agent, parse_observability, parse_stop_risk, parse_termination, scan_string, EpisodeSpec,
-    Trajectory,
+    parse_agent, parse_observability, parse_stop_risk, scan_string, termination_parser,
+    EpisodeSpec, Trajectory,
 };
 use crate::learn::agent::{run_agent_episode, Policies};
 use crate::plot::svg::{self, Scene};
@@ -29,12 +29,12 @@ pub struct EpisodeArgs {
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax must reach this (0 = off; the
     /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
     min_observability: f32,
     /// With --termination confident: stop only once the estimated probability that the
     /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
     /// 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
     stop_risk: f32,
     /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
     /// learnt, learnt-int8, or the greedy benchmarks oigm, oigm-cost, eem (docs/BENCHMARKS.md).
@@ -62,7 +62,7 @@ pub struct EpisodeArgs {
     sensor: SensorArgs,
     /// When to stop: on coarse success against the ground truth (paper), by the calibrated
     /// stop (no ground truth; answers with the refined pose), or only at the action limit.
-    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
     termination: crate::episode::Termination,
     /// Write the full trajectory as JSON here.
     #[arg(long)]

@@ -3,7 +3,7 @@
 //! `--extra-measurements`, the pose error past the minimal set.
 
 use super::{command_line, SensorArgs};
-use crate::episode::{parse_agent, parse_observability, parse_stop_risk, parse_termination};
+use crate::episode::{parse_agent, parse_observability, parse_stop_risk, termination_parser};
 use crate::learn::agent::Policies;
 use crate::world::planfile::{self, PlanReadArgs};
 use crate::world::plans;
@@ -56,7 +56,7 @@ pub struct EvalArgs {
     /// When an episode stops: coarse success against the ground truth (the paper), or the
     /// calibrated stop (no ground truth; it answers with the refined pose, and recognition
     /// scores the cell that pose lies in), or only the action limit.
-    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
     termination: crate::episode::Termination,
     #[command(flatten)]
     sensor: SensorArgs,
@@ -81,12 +81,12 @@ pub struct EvalArgs {
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax must reach this (0 = off; the
     /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
     min_observability: f32,
     /// With --termination confident: stop only once the estimated probability that the
     /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
     /// 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
     stop_risk: f32,
 }
 
@@ -119,6 +119,8 @@ pub fn run(a: EvalArgs) -> Result<()> {
     if let Some(bad) = a.rot_bins.iter().find(|k| **k != 1 && **k != 10) {
         bail!("--rot-bins takes 1 and/or 10 (the paper's two settings), got {bad}");
     }
+    // Fail now, not after the whole run, when the results cannot be written.
+    super::ensure_writable_dir(&a.out)?;
     let mut rot_bins = a.rot_bins.clone();
     rot_bins.dedup();
     super::set_threads(a.threads)?;

@@ -85,3 +85,24 @@ pub(crate) fn set_threads(threads: Option<usize>) -> Result<()> {
     }
     Ok(())
 }
+
+/// Creates `dir` if needed and checks that a file can be written in it (a probe file,
+/// removed again), so a long command refuses an unwritable `--out` before it runs.
+pub fn ensure_writable_dir(dir: &std::path::Path) -> anyhow::Result<()> {
+    use anyhow::Context;
+    std::fs::create_dir_all(dir).with_context(|| {
+        format!(
+            "cannot create the output directory {} (check the path and its permissions)",
+            dir.display()
+        )
+    })?;
+    let probe = dir.join(format!(".activesense-write-check-{}", std::process::id()));
+    std::fs::write(&probe, b"").with_context(|| {
+        format!(
+            "cannot write into the output directory {} (check its permissions)",
+            dir.display()
+        )
+    })?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}

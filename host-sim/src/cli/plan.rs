@@ -24,7 +24,8 @@ pub struct PlanArgs {
     /// Write an SVG picture here.
     #[arg(long)]
     svg: Option<PathBuf>,
-    /// Write the plan (vertices, shape, placement) as JSON here.
+    /// Write the plan as JSON here: a plan file `--plan` accepts (`vertices`, metres, the
+    /// model frame), plus its shape, family, placement and the drawn agent.
     #[arg(long)]
     json: Option<PathBuf>,
     /// Episode seed used to place the drawn agent.
@@ -69,7 +70,15 @@ pub fn run(a: PlanArgs) -> Result<()> {
         truth.theta.to_degrees()
     );
     if let Some(path) = &a.json {
-        let doc = serde_json::json!({ "generated": g, "placement": p, "agent": truth });
+        // `vertices` and `name` first: the file is also a plan file that `--plan` reads
+        // (our JSON, metres, model frame); the rest describes how it was generated.
+        let doc = serde_json::json!({
+            "name": format!("plan {}", g.seed),
+            "vertices": g.plan.raw(),
+            "generated": g,
+            "placement": p,
+            "agent": truth,
+        });
         write_file(path, &serde_json::to_string_pretty(&doc)?)?;
         println!("wrote {}", path.display());
     }

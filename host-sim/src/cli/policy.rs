@@ -4,11 +4,11 @@
 
 use super::write_file;
 use crate::learn::agent::Policies;
+use crate::link::runner::open_link;
 use crate::link::serial::{self, LinkSpec};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 #[derive(Args)]
 pub struct QuantizeArgs {
@@ -144,9 +144,14 @@ pub struct PolicyUploadArgs {
     /// The int8 policy blob (`activesense policy quantize` output).
     #[arg(long)]
     pub int8: PathBuf,
-    /// Reply timeout in milliseconds.
-    #[arg(long, default_value_t = 5000)]
-    pub timeout_ms: u64,
+    /// Reply time-out in milliseconds (default: what the device announces as its slowest
+    /// reply, plus half again).
+    #[arg(long)]
+    pub timeout_ms: Option<u64>,
+    /// Power the instrument off afterwards (protocol `Shutdown`). Without it the instrument
+    /// keeps serving, with the uploaded policy in its RAM.
+    #[arg(long)]
+    pub shutdown: bool,
 }
 
 /// `activesense policy info`.
@@ -155,9 +160,14 @@ pub struct PolicyInfoArgs {
     /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
     #[arg(long)]
     pub link: LinkSpec,
-    /// Reply timeout in milliseconds.
-    #[arg(long, default_value_t = 5000)]
-    pub timeout_ms: u64,
+    /// Reply time-out in milliseconds (default: what the device announces as its slowest
+    /// reply, plus half again).
+    #[arg(long)]
+    pub timeout_ms: Option<u64>,
+    /// Power the instrument off afterwards (protocol `Shutdown`). Without it the instrument
+    /// keeps serving, with the uploaded policy in its RAM.
+    #[arg(long)]
+    pub shutdown: bool,
 }
 
 fn print_policy(i: &activesense_core::protocol::PolicyInfo) {
@@ -188,8 +198,7 @@ pub fn upload(a: PolicyUploadArgs) -> Result<()> {
             )
         })?
         .rot_bins();
-    let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
-        .with_context(|| format!("opening {:?}", a.link))?;
+    let mut link = open_link(&a.link, &[], a.timeout_ms)?;
     let info = link.client.hello().context("handshake")?;
     if info.capabilities & activesense_core::protocol::CAP_POLICY_UPLOAD == 0 {
         bail!(
@@ -205,19 +214,28 @@ pub fn upload(a: PolicyUploadArgs) -> Result<()> {
     bar.finish_and_clear();
     println!("uploaded {} ({} bytes)", a.int8.display(), blob.len());
     print_policy(&installed);
-    link.close().context("closing the link")?;
-    Ok(())
+    end_session(link, a.shutdown)
 }
 
 /// Prints which policy serves K = 1 and K = 10 on the instrument.
 pub fn info(a: PolicyInfoArgs) -> Result<()> {
-    let mut link = serial::open(&a.link, Duration::from_millis(a.timeout_ms))
-        .with_context(|| format!("opening {:?}", a.link))?;
+    let mut link = open_link(&a.link, &[], a.timeout_ms)?;
     let info = link.client.hello().context("handshake")?;
     println!("device: {} (protocol v{})", info.firmware, info.protocol);
     for k in [1u8, 10] {
         print_policy(&link.client.policy_info(k)?);
     }
-    link.close().context("closing the link")?;
+    end_session(link, a.shutdown)
+}
+
+/// `Shutdown` with `--shutdown`; else the session ends and the instrument keeps serving
+/// (a `loopback`/`qemu` device this command started ends with it).
+fn end_session(link: serial::Link, shutdown: bool) -> Result<()> {
+    if shutdown {
+        link.shutdown().context("shutting the device down")?;
+        println!("device shut down");
+    } else {
+        link.close().context("closing the link")?;
+    }
     Ok(())
 }

@@ -415,6 +415,20 @@ pub fn parse_termination(s: &str) -> Result<Termination, String> {
     })
 }
 
+/// The `--termination` value parser of every subcommand: the rules are listed with a line
+/// each in `--help` and in the error for an unknown one.
+pub fn termination_parser() -> impl clap::builder::TypedValueParser<Value = Termination> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new([
+        PossibleValue::new("oracle")
+            .help("stop on coarse success against the simulated truth (the paper's rule)"),
+        PossibleValue::new("confident")
+            .help("stop once the estimated risk of a wrong registration is below --stop-risk"),
+        PossibleValue::new("action-limit").help("never stop early: run to --max-actions"),
+    ])
+    .try_map(|s| parse_termination(&s))
+}
+
 /// Parses `--min-observability τ`: a number from 0 (off) to 1, NaN refused.
 pub fn parse_observability(s: &str) -> Result<f32, String> {
     match s.parse::<f32>() {

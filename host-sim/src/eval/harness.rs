@@ -12,7 +12,7 @@ use activesense_core::episode::EpisodeConfig;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// What to evaluate.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -108,30 +108,57 @@ pub struct Timing {
 pub(crate) type Group = (AgentKind, u8);
 
 /// The (agent, rot_bins) groups in report order, and one job (group, plan index) per
-/// episode.
+/// episode, plan-major: every stretch of the job list mixes the groups as the whole does,
+/// so the progress bar's rate (and ETA) is the run's from the start. (Group-major, the
+/// cheap K = 1 episodes came first and the ETA started at a third of the real time.)
+/// Within a group the jobs stay in plan order, which the reports rely on.
 pub(crate) fn groups_and_jobs(opts: &EvalOptions) -> (Vec<Group>, Vec<(usize, u32)>) {
     let groups: Vec<Group> = opts
         .agents
         .iter()
         .flat_map(|&a| opts.rot_bins.iter().map(move |&k| (a, k)))
         .collect();
-    let jobs = (0..groups.len())
-        .flat_map(|g| (0..opts.plans).map(move |i| (g, i)))
+    let n = groups.len();
+    let jobs = (0..opts.plans)
+        .flat_map(|i| (0..n).map(move |g| (g, i)))
         .collect();
     (groups, jobs)
 }
 
-/// The progress bar of a run of `len` episodes (hidden when `show` is false).
+/// The remaining time of a run at `pos` of `len` episodes after `elapsed`: the whole run's
+/// mean rate so far (not a recent-rate estimate, which follows whichever episodes
+/// finished last), and nothing until a warm-up of 2 s and 2 % of the episodes (at least
+/// one per worker thread) has passed.
+pub fn run_eta(pos: u64, len: u64, elapsed: Duration, threads: u64) -> Option<Duration> {
+    let warm = (len / 50).max(threads).max(1);
+    if pos < warm || elapsed < Duration::from_secs(2) || pos > len {
+        return None;
+    }
+    Some(elapsed.mul_f64((len - pos) as f64 / pos as f64))
+}
+
+/// The progress bar of a run of `len` episodes (hidden when `show` is false); its ETA is
+/// [`run_eta`].
 pub fn episode_bar(len: u64, show: bool) -> ProgressBar {
     if !show {
         return ProgressBar::hidden();
     }
+    let threads = rayon::current_num_threads() as u64;
     let b = ProgressBar::new(len);
     b.set_style(
         ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} episodes ({per_sec}, eta {eta})",
+            "{elapsed_precise} [{bar:40}] {pos}/{len} episodes ({per_sec}, eta {run_eta})",
         )
         .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .with_key(
+            "run_eta",
+            move |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = match run_eta(s.pos(), s.len().unwrap_or(0), s.elapsed(), threads) {
+                    Some(d) => write!(w, "{}", indicatif::HumanDuration(d)),
+                    None => write!(w, "estimating"),
+                };
+            },
+        )
         .progress_chars("=> "),
     );
     b

@@ -64,3 +64,29 @@ fn wilson_interval() {
     let (lo, hi) = wilson(100, 100);
     assert!(lo > 0.96 && hi > 0.9999 && hi <= 1.0);
 }
+
+/// Jobs run plan-major (every stretch of the list mixes the groups like the whole run, so
+/// the progress rate is the run's), each group still in plan order.
+#[test]
+fn jobs_interleave_groups_in_plan_order() {
+    let (groups, jobs) = super::harness::groups_and_jobs(&small(3));
+    assert_eq!(groups.len(), 4);
+    assert_eq!(&jobs[..5], &[(0, 0), (1, 0), (2, 0), (3, 0), (0, 1)]);
+    for g in 0..groups.len() {
+        let plans: Vec<u32> = jobs.iter().filter(|j| j.0 == g).map(|j| j.1).collect();
+        assert_eq!(plans, vec![0, 1, 2]);
+    }
+}
+
+/// The ETA is the run's mean rate after a warm-up, never a guess from the first episodes.
+#[test]
+fn eta_waits_for_warm_up_then_uses_the_mean_rate() {
+    use super::harness::run_eta;
+    use std::time::Duration;
+    let s = Duration::from_secs;
+    assert_eq!(run_eta(1, 1000, s(10), 2), None); // under 2 % done
+    assert_eq!(run_eta(100, 1000, s(1), 2), None); // under 2 s
+    assert_eq!(run_eta(1, 4, s(10), 2), None); // fewer than one per thread
+    assert_eq!(run_eta(250, 1000, s(60), 2), Some(s(180)));
+    assert_eq!(run_eta(1000, 1000, s(60), 2), Some(s(0)));
+}

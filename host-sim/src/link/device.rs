@@ -211,6 +211,9 @@ impl<W: Write> embedded_io::Write for EioWrite<'_, W> {
 pub const HOST_DEVICE: SessionConfig = SessionConfig {
     firmware: concat!("host-session ", env!("CARGO_PKG_VERSION")),
     timeout_ms: DEFAULT_TIMEOUT_MS,
+    // Native code (the core at opt-level 3 in every profile) answers in well under a
+    // second; the bound leaves room for a debug build on a loaded CI machine.
+    max_reply_ms: 5_000,
     cycle_clock: None,
     policies: &activesense_core::policy::builtin::POLICIES,
 };
@@ -424,6 +427,18 @@ impl Qemu {
             self.output(),
             String::from_utf8_lossy(&self.stderr_bytes())
         )
+    }
+
+    /// Stops the emulator (kills the process: the device this host started ends with the
+    /// host's command) and returns its console output so far.
+    pub fn kill(mut self) -> String {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+            // Let the reader threads drain the pipes.
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        self.output()
     }
 
     /// Waits for the emulator to exit; returns its output, or an error when it exits

@@ -24,19 +24,35 @@ pub enum LinkError {
     BadFrame(FrameError),
     /// A local error (plan too large, transport setup...).
     Local(String),
+    /// A request could not be got through: sent `sends` times (re-sent after corrupt
+    /// frames or time-outs), `last` is what went wrong the last time.
+    GaveUp {
+        /// Times the request was sent.
+        sends: u32,
+        /// The last failure.
+        last: Box<LinkError>,
+    },
 }
 
 impl std::fmt::Display for LinkError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            LinkError::Timeout => write!(f, "timed out waiting for the device"),
+            LinkError::Timeout => write!(
+                f,
+                "timed out waiting for the device (is it running, on this port and baud rate?)"
+            ),
             LinkError::Disconnected => write!(f, "the device link closed"),
             LinkError::Io(e) => write!(f, "link I/O error: {e}"),
             LinkError::Device(e) => write!(f, "device error: {e}"),
             LinkError::Unexpected(s) => write!(f, "unexpected reply from the device: {s}"),
             LinkError::Incompatible(s) => write!(f, "incompatible device: {s}"),
-            LinkError::BadFrame(e) => write!(f, "corrupt frame from the device: {e:?}"),
+            LinkError::BadFrame(e) => write!(f, "corrupt frame from the device: {e}"),
             LinkError::Local(s) => write!(f, "{s}"),
+            LinkError::GaveUp { sends, last } => write!(
+                f,
+                "no clean reply after sending the request {sends} times (last: {last}); check \
+                 the cable, the baud rate and the line's noise"
+            ),
         }
     }
 }

@@ -18,6 +18,10 @@ use std::process::Command;
 pub enum QemuSerial {
     /// Connect to a TCP listener on 127.0.0.1 at this port (the host link).
     Tcp(u16),
+    /// Listen on 127.0.0.1 at this port, boot without waiting for a client, and take a
+    /// new client after one leaves: an instrument the user started, which serves command
+    /// after command (`--link tcp:127.0.0.1:PORT`).
+    TcpServer(u16),
     /// Nowhere (the smoke boot, which never serves the link).
     Null,
 }
@@ -28,6 +32,9 @@ pub enum QemuSerial {
 pub fn qemu_command(program: &str, elf: &Path, serial: QemuSerial) -> Command {
     let serial = match serial {
         QemuSerial::Tcp(port) => format!("tcp:127.0.0.1:{port},nodelay=on"),
+        QemuSerial::TcpServer(port) => {
+            format!("tcp:127.0.0.1:{port},server=on,wait=off,nodelay=on")
+        }
         QemuSerial::Null => "null".to_string(),
     };
     let mut c = Command::new(program);

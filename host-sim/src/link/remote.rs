@@ -9,15 +9,17 @@
 //! and fails unless actions, observations and report are bit-identical.
 
 use crate::episode::{
-    parse_agent, parse_observability, parse_stop_risk, parse_termination, EpisodeSpec,
+    parse_agent, parse_observability, parse_stop_risk, termination_parser, EpisodeSpec,
 };
 use crate::link::device::{sim_episode, SimInstrument};
-use crate::link::serial::{self, EpisodeRun, Link, LinkSpec};
+use crate::link::runner::{end_session, open_link, print_link_counters};
+pub use crate::link::runner::{
+    reference_run, restartable, run_one, same_run, EpisodeMaker, MAX_RESTARTS,
+};
+use crate::link::serial::{self, EpisodeRun, LinkSpec};
 use crate::world::plans::TEST_SEEDS;
 use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
-use activesense_core::device::instrument::run_local;
-use activesense_core::device::Controller;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_core::protocol::{EpisodeParams, EpisodeReport, UpdateStats};
@@ -48,24 +50,30 @@ pub struct RemoteEpisodeArgs {
     pub episode_seed: u64,
     /// When the device stops an episode: on coarse success against the simulated ground
     /// truth (oracle, the paper's rule), when its belief is confident, or at the action limit.
-    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
     pub termination: activesense_core::episode::Termination,
     /// With --termination confident: stop only once the estimated probability that the
     /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
     /// 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
+    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
     pub stop_risk: f32,
     /// Stop only once the readings determine the pose: the smallest eigenvalue of their
     /// normalised information matrix at the belief argmax must reach this (0 = off; sent
     /// to the instrument, which applies it; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0, value_parser = parse_observability)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
     pub min_observability: f32,
-    /// Reply timeout in milliseconds.
-    #[arg(long, default_value_t = 5000)]
-    pub timeout_ms: u64,
+    /// Reply time-out in milliseconds. Default: what the device announces as its slowest
+    /// reply (its `Hello`), plus half again; a request without a reply in time is re-sent.
+    #[arg(long)]
+    pub timeout_ms: Option<u64>,
     /// Replay every episode in-process and require bit-identical results.
     #[arg(long)]
     pub verify: bool,
+    /// Power the instrument off at the end (protocol `Shutdown`; the firmware exits).
+    /// Without it the session ends and the instrument keeps serving: a policy uploaded to
+    /// its RAM stays. (A `loopback` or `qemu` device this command started ends with it.)
+    #[arg(long)]
+    pub shutdown: bool,
 }
 
 /// `activesense sim`.
@@ -112,6 +120,23 @@ pub enum SerialCommand {
     List,
     /// Load a plan file into the instrument controller and run episodes in that room.
     Run(SerialRunArgs),
+    /// Power the instrument off (protocol `Shutdown`; the firmware exits). Every other
+    /// command leaves it serving.
+    Shutdown(SerialShutdownArgs),
+}
+
+/// `activesense serial shutdown`.
+#[derive(Args, Debug)]
+pub struct SerialShutdownArgs {
+    /// Serial device (e.g. /dev/ttyUSB0).
+    #[arg(long)]
+    pub port: String,
+    /// Baud rate.
+    #[arg(long, default_value_t = serial::DEFAULT_BAUD)]
+    pub baud: u32,
+    /// Reply time-out in milliseconds (default: as announced by the device).
+    #[arg(long)]
+    pub timeout_ms: Option<u64>,
 }
 
 /// `activesense serial run`.
@@ -167,42 +192,6 @@ fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
         termination: a.termination,
         user_plan: None,
     })
-}
-
-/// Runs the same episode in-process (reference for `--verify` and the HIL tests).
-pub fn reference_run(
-    plan: &FloorPlan,
-    params: &EpisodeParams,
-    instrument: &mut SimInstrument,
-) -> Result<EpisodeRun> {
-    let mut ctl = Box::new(Controller::new(
-        None,
-        &activesense_core::policy::builtin::POLICIES,
-    ));
-    let mut steps = Vec::new();
-    let report = run_local(&mut ctl, plan, params, instrument, |a, o| {
-        steps.push((a, *o))
-    })
-    .map_err(|e| anyhow::anyhow!("in-process reference run failed: {e:?}"))?;
-    Ok(EpisodeRun { steps, report })
-}
-
-/// True when two runs agree bit for bit (cycle statistics excluded: they measure the
-/// machine, not the episode).
-pub fn same_run(a: &EpisodeRun, b: &EpisodeRun) -> bool {
-    let bits = |r: &EpisodeRun| {
-        r.steps
-            .iter()
-            .map(|(act, o)| (*act, o.range.map(f32::to_bits), o.scan))
-            .collect::<Vec<_>>()
-    };
-    let strip = |r: &EpisodeReport| EpisodeReport {
-        cycles: Default::default(),
-        ..*r
-    };
-    bits(a) == bits(b)
-        && strip(&a.report) == strip(&b.report)
-        && a.report.cost.to_bits() == b.report.cost.to_bits()
 }
 
 #[derive(Default)]
@@ -324,39 +313,9 @@ fn print_totals(t: &Totals, secs: f64) {
     }
 }
 
-fn run_one(
-    link: &mut Link,
-    plan: &FloorPlan,
-    params: &EpisodeParams,
-    mut inst: SimInstrument,
-    reference: Option<(FloorPlan, EpisodeParams, SimInstrument)>,
-) -> Result<EpisodeRun> {
-    link.client.load_plan(plan).context("loading the plan")?;
-    let run = link
-        .client
-        .run_episode(params, &mut inst)
-        .context("running the episode")?;
-    if run.trace_hash() != run.report.trace_hash {
-        bail!(
-            "trace fingerprint mismatch: host {:08x}, device {:08x}",
-            run.trace_hash(),
-            run.report.trace_hash
-        );
-    }
-    if let Some((p, prm, mut i)) = reference {
-        let local = reference_run(&p, &prm, &mut i)?;
-        if !same_run(&run, &local) {
-            bail!("device run differs from the in-process run");
-        }
-    }
-    Ok(run)
-}
-
 /// `activesense sim`.
 pub fn cmd_sim(a: SimArgs) -> Result<()> {
-    let timeout = Duration::from_millis(a.episode.timeout_ms);
-    let mut link = serial::open_with_qemu_args(&a.link, timeout, &a.qemu_args)
-        .with_context(|| format!("opening {:?}", a.link))?;
+    let mut link = open_link(&a.link, &a.qemu_args, a.episode.timeout_ms)?;
     let info = link.client.hello().context("handshake")?;
     println!(
         "device: {} (protocol v{}, capabilities {:#x}, max {} vertices, max {} actions)",
@@ -388,11 +347,16 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
             v
         }
     };
+    let mut restarts = 0;
     for (label, spec) in &specs {
-        let (plan, params, inst) = sim_episode(spec);
-        let reference = a.episode.verify.then(|| sim_episode(spec));
-        let run = run_one(&mut link, &plan, &params, inst, reference)
-            .with_context(|| format!("episode on {label}"))?;
+        let run = run_one(
+            &mut link,
+            &|| sim_episode(spec),
+            a.episode.verify,
+            &mut restarts,
+        )
+        .with_context(|| format!("episode on {label}"))?;
+        let (plan, params, _) = sim_episode(spec);
         print_run(label, &run, &plan, &params, &mut t);
     }
     let status = link.client.status().context("status")?;
@@ -408,10 +372,9 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
             ""
         }
     );
+    print_link_counters(&link, restarts);
     print_totals(&t, start.elapsed().as_secs_f64());
-    let (out, raw) = link
-        .close_with_stderr()
-        .context("shutting the device down")?;
+    let (out, raw) = end_session(link, a.episode.shutdown)?;
     if let Some(path) = &a.defmt_out {
         std::fs::write(path, &raw).with_context(|| format!("writing {}", path.display()))?;
     }
@@ -454,8 +417,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                 path: r.port.clone(),
                 baud: r.baud,
             };
-            let timeout = Duration::from_millis(r.episode.timeout_ms);
-            let mut link = serial::open(&spec, timeout)?;
+            let mut link = open_link(&spec, &[], r.episode.timeout_ms)?;
             let info = link
                 .client
                 .hello()
@@ -463,6 +425,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             println!("device: {} (protocol v{})", info.firmware, info.protocol);
             let mut t = Totals::default();
             let start = Instant::now();
+            let mut restarts = 0;
             for i in 0..r.episode.episodes {
                 let spec = spec_for(0, &r.episode)?;
                 let world_seed = spec.world_seed() ^ i as u64;
@@ -475,14 +438,35 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                     params.seed ^= i as u64;
                     (plan.clone(), params, SimInstrument::new(world))
                 };
-                let (p, params, inst) = mk();
-                let reference = r.episode.verify.then(mk);
-                let run = run_one(&mut link, &p, &params, inst, reference)
+                let run = run_one(&mut link, &mk, r.episode.verify, &mut restarts)
                     .with_context(|| format!("episode {i} on {}", r.port))?;
+                let (p, params, _) = mk();
                 print_run(&format!("episode {i}"), &run, &p, &params, &mut t);
             }
+            if r.episode.verify {
+                println!(
+                    "every episode verified bit-identical to the in-process run ({} episodes)",
+                    t.episodes
+                );
+            }
+            print_link_counters(&link, restarts);
             print_totals(&t, start.elapsed().as_secs_f64());
-            // A real instrument keeps running: no Shutdown, just leave the session.
+            // The instrument keeps serving unless --shutdown.
+            end_session(link, r.episode.shutdown)?;
+            Ok(())
+        }
+        SerialCommand::Shutdown(s) => {
+            let spec = LinkSpec::Serial {
+                path: s.port.clone(),
+                baud: s.baud,
+            };
+            let mut link = open_link(&spec, &[], s.timeout_ms)?;
+            let info = link
+                .client
+                .hello()
+                .with_context(|| format!("handshake on {}", s.port))?;
+            link.shutdown().context("shutting the device down")?;
+            println!("{} on {}: shut down", info.firmware, s.port);
             Ok(())
         }
     }
@@ -508,7 +492,7 @@ pub struct McuBenchArgs {
     #[arg(long, default_value_t = 0)]
     pub episode_seed: u64,
     /// When the device stops an episode (see `sim --termination`).
-    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
+    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
     pub termination: activesense_core::episode::Termination,
     /// Reply timeout in milliseconds.
     #[arg(long, default_value_t = 60_000)]
@@ -616,8 +600,9 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
             termination: a.termination,
             stop_risk: activesense_core::limits::DEFAULT_STOP_RISK,
             min_observability: 0.0,
-            timeout_ms: a.timeout_ms,
+            timeout_ms: Some(a.timeout_ms),
             verify: false,
+            shutdown: false,
         };
         let mut row = McuBenchRow {
             rot_bins,
@@ -625,9 +610,13 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
         };
         for i in 0..a.episodes {
             let seed = a.first_seed.wrapping_add(i);
-            let (plan, params, inst) = sim_episode(&spec_for(seed, &ep)?);
-            let run = run_one(&mut link, &plan, &params, inst, None)
+            let spec = spec_for(seed, &ep)?;
+            let mut restarts = 0;
+            let run = run_one(&mut link, &|| sim_episode(&spec), false, &mut restarts)
                 .with_context(|| format!("K = {rot_bins}, episode on plan {seed}"))?;
+            if restarts > 0 {
+                bail!("K = {rot_bins}, plan {seed}: the link lost the episode (restarted)");
+            }
             let c = run.report.cycles;
             row.episodes += 1;
             row.vote.add(&c.vote);
@@ -638,7 +627,8 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
         }
         rows.push(row);
     }
-    let out = link.close().context("shutting the device down")?;
+    // The emulator this command started ends with it.
+    let out = link.close().context("stopping the emulator")?;
     if !out.contains("core initialised") {
         bail!("unexpected firmware console output: {out}");
     }

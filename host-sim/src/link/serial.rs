@@ -21,7 +21,7 @@ use activesense_core::{FloorPlan, MAX_VERTICES};
 use heapless::Vec as HVec;
 use std::io::{Read, Write};
 use std::path::PathBuf;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// One episode as seen by the host: every (action, observation) and the device's report.
 #[derive(Clone, Debug, PartialEq)]
@@ -43,26 +43,78 @@ impl EpisodeRun {
     }
 }
 
+/// What the client did to get its requests through a noisy or slow line (since it was
+/// created). A clean line leaves every counter at 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinkCounters {
+    /// Requests re-sent with the same id (the device answers a repeat with its cached
+    /// reply, so nothing is done twice).
+    pub resent: u32,
+    /// Frames from the device that arrived corrupt (COBS, CRC, oversized) and were dropped.
+    pub corrupt_replies: u32,
+    /// `NO_ID` errors from the device: it received a corrupt frame (ours, or line noise).
+    pub device_frame_errors: u32,
+    /// Waits for a reply that ran past the reply time-out.
+    pub timeouts: u32,
+}
+
+impl LinkCounters {
+    /// One line for a run summary.
+    pub fn summary(&self) -> String {
+        format!(
+            "{} frames retried ({} corrupt replies dropped, {} corrupt frames reported by the \
+             device, {} reply time-outs)",
+            self.resent, self.corrupt_replies, self.device_frame_errors, self.timeouts
+        )
+    }
+}
+
+/// How long the transport's read blocks at most: the client's clock for back-off and reply
+/// time-outs ([`Client::set_reply_timeout`]) runs in steps of this.
+pub const POLL: Duration = Duration::from_millis(20);
+/// Reply time-out until the device has said how slow it can be (its `Hello`).
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(3);
+/// Most times one request is sent (the first included) before the call gives up.
+pub const MAX_SENDS: u32 = 10;
+/// Most reply time-outs one call sits through before it gives up.
+pub const MAX_TIMEOUTS: u32 = 3;
+/// First back-off before a re-send after a corrupt frame; doubles per re-send.
+pub const BACKOFF: Duration = Duration::from_millis(5);
+/// Longest back-off.
+pub const MAX_BACKOFF: Duration = Duration::from_millis(500);
+
 /// Protocol client over a byte stream.
+///
+/// **Resynchronisation.** Every frame starts after a `0x00`, so a receiver that sees
+/// garbage is back in step at the next delimiter. When the device reports a corrupt frame
+/// (`NO_ID` error), a reply arrives corrupt, or no reply comes within the reply time-out,
+/// the client re-sends the pending request with the *same* id after a back-off (5 ms,
+/// doubling, at most 500 ms; at most [`MAX_SENDS`] sends and [`MAX_TIMEOUTS`] time-outs).
+/// The device answers a repeated id with its cached reply, so an episode resumes where it
+/// was; [`LinkCounters`] counts what it took.
 pub struct Client<T: Read + Write> {
     io: T,
     acc: FrameAccumulator,
     last_id: u16,
-    /// Re-sends of a request after a `NO_ID` error (the device saw a corrupt frame).
-    pub retries: u32,
+    counters: LinkCounters,
+    reply_timeout: Duration,
+    follow_device: bool,
     rx: [u8; 256],
     rx_pos: usize,
     rx_len: usize,
 }
 
 impl<T: Read + Write> Client<T> {
-    /// Wraps a transport. Nothing is sent until the first call.
+    /// Wraps a transport. Nothing is sent until the first call. The reply time-out is
+    /// [`HANDSHAKE_TIMEOUT`] until the device's `Hello` announces its worst case.
     pub fn new(io: T) -> Self {
         Client {
             io,
             acc: FrameAccumulator::new(),
             last_id: NO_ID,
-            retries: 0,
+            counters: LinkCounters::default(),
+            reply_timeout: HANDSHAKE_TIMEOUT,
+            follow_device: true,
             rx: [0; 256],
             rx_pos: 0,
             rx_len: 0,
@@ -74,6 +126,24 @@ impl<T: Read + Write> Client<T> {
         &mut self.io
     }
 
+    /// Re-sends, corrupt frames and time-outs so far.
+    pub fn counters(&self) -> LinkCounters {
+        self.counters
+    }
+
+    /// The current reply time-out.
+    pub fn reply_timeout(&self) -> Duration {
+        self.reply_timeout
+    }
+
+    /// Sets the reply time-out. With `follow_device`, it is a floor: the next `Hello`
+    /// raises it to what the device announces (its `max_reply_ms`, plus half again and
+    /// 0.5 s for the line); without, it stays as given (the user's `--timeout-ms`).
+    pub fn set_reply_timeout(&mut self, timeout: Duration, follow_device: bool) {
+        self.reply_timeout = timeout;
+        self.follow_device = follow_device;
+    }
+
     /// Sends raw bytes (fault injection).
     pub fn send_raw(&mut self, bytes: &[u8]) -> LinkResult<()> {
         self.io.write_all(bytes)?;
@@ -81,11 +151,35 @@ impl<T: Read + Write> Client<T> {
         Ok(())
     }
 
-    /// Receives the next complete frame from the device.
+    /// Receives the next complete frame from the device, waiting at most the reply
+    /// time-out. A corrupt frame is [`LinkError::BadFrame`] (the accumulator is already
+    /// back in step for the next one).
     pub fn recv_frame(&mut self) -> LinkResult<(u16, Response)> {
+        self.recv_until(Instant::now() + self.reply_timeout)
+    }
+
+    /// As [`Client::recv_frame`], until `deadline` ([`LinkError::Timeout`] after it; the
+    /// transport's own read time-out is only the polling step).
+    fn recv_until(&mut self, deadline: Instant) -> LinkResult<(u16, Response)> {
         loop {
             if self.rx_pos == self.rx_len {
-                let n = self.io.read(&mut self.rx)?;
+                if Instant::now() >= deadline {
+                    return Err(LinkError::Timeout);
+                }
+                let n = match self.io.read(&mut self.rx) {
+                    Ok(n) => n,
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            std::io::ErrorKind::TimedOut
+                                | std::io::ErrorKind::WouldBlock
+                                | std::io::ErrorKind::Interrupted
+                        ) =>
+                    {
+                        continue
+                    }
+                    Err(e) => return Err(e.into()),
+                };
                 if n == 0 {
                     return Err(LinkError::Disconnected);
                 }
@@ -118,34 +212,79 @@ impl<T: Read + Write> Client<T> {
         self.last_id
     }
 
-    /// Sends `req` and returns the matching reply (device errors as `Err`). A `NO_ID`
-    /// error means the device saw a corrupt frame: the request is re-sent with the same
-    /// id up to 3 times.
+    /// Sends `req` and returns the matching reply (device errors as `Err`), re-sending it
+    /// as the type's docs say when the line corrupts or loses frames.
     pub fn call(&mut self, req: &Request) -> LinkResult<Response> {
         let id = self.next_id();
         self.call_with_id(id, req)
     }
 
     fn call_with_id(&mut self, id: u16, req: &Request) -> LinkResult<Response> {
-        let mut attempts = 0;
         self.send_request(id, req)?;
+        let mut sends = 1u32;
+        let mut timeouts = 0u32;
+        let mut deadline = Instant::now() + self.reply_timeout;
+        // A re-send waits for its back-off: the reply may still be on its way (the
+        // corrupt frame was line noise, not our request).
+        let mut resend_at: Option<Instant> = None;
+        let mut last_error = LinkError::Timeout;
         loop {
-            let (rid, resp) = self.recv_frame()?;
-            if rid == id {
-                return match resp {
-                    Response::Error(e) => Err(LinkError::Device(e)),
-                    r => Ok(r),
-                };
-            }
-            if let (NO_ID, Response::Error(e)) = (rid, &resp) {
-                if attempts >= 3 {
-                    return Err(LinkError::Device(*e));
+            let wake = resend_at.map_or(deadline, |r| r.min(deadline));
+            let event = self.recv_until(wake);
+            let corrupt = match event {
+                Ok((rid, resp)) if rid == id => {
+                    return match resp {
+                        Response::Error(e) => Err(LinkError::Device(e)),
+                        r => Ok(r),
+                    }
                 }
-                attempts += 1;
-                self.retries += 1;
+                Ok((NO_ID, Response::Error(e))) => {
+                    self.counters.device_frame_errors += 1;
+                    last_error = LinkError::Device(e);
+                    true
+                }
+                // A stale reply to an earlier id (a repeat answered twice), or the
+                // unsolicited boot announcement: skip.
+                Ok(_) => false,
+                Err(LinkError::BadFrame(e)) => {
+                    self.counters.corrupt_replies += 1;
+                    last_error = LinkError::BadFrame(e);
+                    true
+                }
+                Err(LinkError::Timeout) => {
+                    let now = Instant::now();
+                    if now >= deadline {
+                        self.counters.timeouts += 1;
+                        timeouts += 1;
+                        if timeouts >= MAX_TIMEOUTS {
+                            return Err(LinkError::Timeout);
+                        }
+                        last_error = LinkError::Timeout;
+                        resend_at = Some(now);
+                    }
+                    false
+                }
+                Err(e) => return Err(e),
+            };
+            if corrupt && resend_at.is_none() {
+                let backoff = BACKOFF
+                    .saturating_mul(1 << (sends - 1).min(10))
+                    .min(MAX_BACKOFF);
+                resend_at = Some(Instant::now() + backoff);
+            }
+            if resend_at.is_some_and(|r| Instant::now() >= r) {
+                if sends >= MAX_SENDS {
+                    return Err(LinkError::GaveUp {
+                        sends,
+                        last: Box::new(last_error),
+                    });
+                }
+                sends += 1;
+                self.counters.resent += 1;
+                resend_at = None;
+                deadline = Instant::now() + self.reply_timeout;
                 self.send_request(id, req)?;
             }
-            // Stale reply to an earlier id, or an unsolicited boot announcement: skip.
         }
     }
 
@@ -176,6 +315,12 @@ impl<T: Read + Write> Client<T> {
             Err(e) => return Err(e),
         };
         check_compatible(&info)?;
+        if self.follow_device {
+            let device = Duration::from_millis(info.max_reply_ms as u64);
+            self.reply_timeout = self
+                .reply_timeout
+                .max(device + device / 2 + Duration::from_millis(500));
+        }
         Ok(info)
     }
 
@@ -418,7 +563,25 @@ impl std::str::FromStr for LinkSpec {
 pub trait Stream: Read + Write + Send {}
 impl<T: Read + Write + Send> Stream for T {}
 
+impl std::fmt::Display for LinkSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LinkSpec::Loopback => f.write_str("loopback"),
+            LinkSpec::Tcp(a) => write!(f, "tcp:{a}"),
+            LinkSpec::Serial { path, baud } => write!(f, "serial:{path}@{baud}"),
+            LinkSpec::Qemu(elf) => write!(f, "qemu:{}", elf.display()),
+        }
+    }
+}
+
 /// An open link: the client plus whatever must be kept alive/stopped with it.
+///
+/// **Who powers the device off.** Only [`Link::shutdown`] sends `Shutdown`. [`Link::close`]
+/// ends the session and leaves a device the user runs (serial port, TCP) serving, so a
+/// policy uploaded into its RAM is still there for the next command; a device this process
+/// started itself (the `loopback` thread, the `qemu` emulator) ends with it: the thread
+/// sees its pipe close, the emulator is killed (a host-side process kill, not a protocol
+/// message).
 pub struct Link {
     /// The protocol client.
     pub client: Client<Box<dyn Stream>>,
@@ -428,7 +591,8 @@ pub struct Link {
     pub device_thread: Option<std::thread::JoinHandle<()>>,
 }
 
-/// Opens the transport named by `spec` with reply timeout `timeout`.
+/// Opens the transport named by `spec`; `timeout` is the reply time-out until the device's
+/// `Hello` announces a longer worst case ([`Client::set_reply_timeout`]).
 pub fn open(spec: &LinkSpec, timeout: Duration) -> LinkResult<Link> {
     open_with_qemu_args(spec, timeout, &[])
 }
@@ -440,52 +604,54 @@ pub fn open_with_qemu_args(
     timeout: Duration,
     qemu_args: &[String],
 ) -> LinkResult<Link> {
-    match spec {
+    let mut link = match spec {
         LinkSpec::Loopback => {
-            let (host, device) = Pipe::pair(timeout);
+            let (host, device) = Pipe::pair(POLL);
             let handle = spawn_loopback(device);
-            Ok(Link {
+            Link {
                 client: Client::new(Box::new(host)),
                 qemu: None,
                 device_thread: Some(handle),
-            })
+            }
         }
         LinkSpec::Tcp(addr) => {
             let s = std::net::TcpStream::connect(addr)
                 .map_err(|e| LinkError::Local(format!("cannot connect to {addr}: {e}")))?;
-            s.set_read_timeout(Some(timeout))?;
+            s.set_read_timeout(Some(POLL))?;
             s.set_nodelay(true)?;
-            Ok(Link {
+            Link {
                 client: Client::new(Box::new(s)),
                 qemu: None,
                 device_thread: None,
-            })
+            }
         }
         LinkSpec::Serial { path, baud } => {
             let port = serialport::new(path, *baud)
-                .timeout(timeout)
+                .timeout(POLL)
                 .open()
                 .map_err(|e| LinkError::Local(format!("cannot open serial port {path}: {e}")))?;
-            Ok(Link {
+            Link {
                 client: Client::new(Box::new(port)),
                 qemu: None,
                 device_thread: None,
-            })
+            }
         }
         LinkSpec::Qemu(elf) => {
-            let (qemu, stream) = Qemu::start_with_args(elf, timeout, qemu_args)?;
-            Ok(Link {
+            let (qemu, stream) = Qemu::start_with_args(elf, POLL, qemu_args)?;
+            Link {
                 client: Client::new(Box::new(stream)),
                 qemu: Some(qemu),
                 device_thread: None,
-            })
+            }
         }
-    }
+    };
+    link.client.set_reply_timeout(timeout, true);
+    Ok(link)
 }
 
 impl Link {
-    /// Sends `Shutdown` and waits for the device side (thread / emulator) to stop.
-    /// Returns the emulator's semihosting output for `qemu` links.
+    /// Ends the session; the device keeps serving unless this process started it (see
+    /// the type's docs). Returns the emulator's semihosting output for `qemu` links.
     pub fn close(self) -> LinkResult<String> {
         self.close_with_stderr().map(|(out, _)| out)
     }
@@ -493,25 +659,42 @@ impl Link {
     /// As [`Link::close`], also returning the emulator's raw stderr (the firmware's defmt
     /// frames, see `cargo xtask qemu-log`); empty for other links.
     pub fn close_with_stderr(self) -> LinkResult<(String, Vec<u8>)> {
+        self.finish(false)
+    }
+
+    /// Sends `Shutdown` (the device powers off: the firmware exits) and waits for the
+    /// device side (thread / emulator) to stop. Returns the emulator's semihosting output
+    /// for `qemu` links.
+    pub fn shutdown(self) -> LinkResult<String> {
+        self.shutdown_with_stderr().map(|(out, _)| out)
+    }
+
+    /// As [`Link::shutdown`], also returning the emulator's raw stderr.
+    pub fn shutdown_with_stderr(self) -> LinkResult<(String, Vec<u8>)> {
+        self.finish(true)
+    }
+
+    fn finish(mut self, shutdown: bool) -> LinkResult<(String, Vec<u8>)> {
         let raw = self.qemu.as_ref().map(|q| q.stderr_handle());
-        let out = self.close_inner()?;
+        let r = if shutdown {
+            self.client.shutdown()
+        } else {
+            Ok(())
+        };
+        let out = if let Some(h) = self.device_thread.take() {
+            drop(self.client);
+            let _ = h.join();
+            String::new()
+        } else {
+            match self.qemu.take() {
+                Some(q) if r.is_ok() && shutdown => q.wait(Duration::from_secs(10))?,
+                Some(q) => q.kill(),
+                None => String::new(),
+            }
+        };
         let raw = raw
             .and_then(|r| r.lock().ok().map(|v| v.clone()))
             .unwrap_or_default();
-        Ok((out, raw))
-    }
-
-    fn close_inner(mut self) -> LinkResult<String> {
-        let r = self.client.shutdown();
-        if let Some(h) = self.device_thread.take() {
-            drop(self.client);
-            let _ = h.join();
-            return r.map(|_| String::new());
-        }
-        let out = match self.qemu.take() {
-            Some(q) => q.wait(Duration::from_secs(10))?,
-            None => String::new(),
-        };
-        r.map(|_| out)
+        r.map(|_| (out, raw))
     }
 }
