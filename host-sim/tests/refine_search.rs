@@ -65,8 +65,8 @@ fn tally(rot_bins: u8, plans: u32, max_actions: u16) -> Tally {
 
 fn check(t: &Tally) {
     let n = t.points as f64;
-    assert!(t.points > 100, "{t:?}");
-    assert!(t.same_cell as f64 >= 0.95 * n, "same answer cell: {t:?}");
+    assert!(t.points > 40, "{t:?}");
+    assert!(t.same_cell as f64 >= 0.9 * n, "same answer cell: {t:?}");
     assert!(
         t.right[1] as f64 >= t.right[0] as f64 - 0.01 * n,
         "right cells: {t:?}"
