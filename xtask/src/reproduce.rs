@@ -101,6 +101,7 @@ pub const STEPS: &[Step] = &[
     cli("inspect-k1", "docs/inspect/k1", &["inspect", "--aggregate", "--agent", "learnt", "--rot-bins", "1", "--plans", "200", "--out", "docs/inspect/k1", "--no-progress"], 5),
     cli("inspect-k10", "docs/inspect/k10", &["inspect", "--aggregate", "--agent", "learnt", "--rot-bins", "10", "--plans", "200", "--out", "docs/inspect/k10", "--no-progress"], 10),
     Step { runner: Runner::Example("stop_trace"), stdout_to: Some("results/stop-trace/k10.txt"), ..cli("stop-trace", "results/stop-trace", &["1000", "10"], 160) },
+    Step { runner: Runner::Example("refine_budget"), stdout_to: Some("results/refine-budget/budgets.md"), ..cli("refine-budget", "results/refine-budget", &["1000"], 100) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-oracle.md"), ..cli("mcu-bench", "results/mcu-bench", &["mcu-bench", "--episodes", "20"], 120) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-oracle.md"), ..cli("mcu-bench-int8", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8"], 30) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-confident.md"), ..cli("mcu-bench-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--termination", "confident"], 160) },

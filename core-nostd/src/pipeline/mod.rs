@@ -25,7 +25,7 @@
 
 use crate::episode::{AgentKind, EpisodeConfig, EpisodeParams};
 use crate::localization::{CellIndex, GhtLocalizer, LocError, LocalizerConfig};
-use crate::registration::refine::{self, RefineInput, Refinement};
+use crate::registration::refine::{self, Budget, RefineInput, Refinement};
 use crate::registration::{
     self, AnnealParams, Measurement, Observability, Observations, RangeModel, Registration,
     RegistrationError,
@@ -55,10 +55,6 @@ pub const MIN_MEASUREMENTS_UNKNOWN_HEADING: usize = 3;
 
 /// Heading starts of the registration sweep when the heading is unknown.
 pub const REGISTRATION_STARTS: u8 = 9;
-
-/// ICP iterations per sweep start in the refinement
-/// ([`crate::registration::refine::RefineInput::sweep_iterations`]).
-pub const SWEEP_ITERATIONS: u16 = 8;
 
 /// Why [`Pipeline::start`] refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -498,7 +494,7 @@ impl Pipeline {
             .params
             .ground_truth
             .map(|t| self.voted && self.localizer.coarse_success(&t, self.order));
-        let (refined, registration_error) = match coarse.map(|_| self.refine(plan)) {
+        let (refined, registration_error) = match coarse.map(|_| self.refine_final(plan)) {
             None => (None, Some(RegistrationError::TooFewObservations)),
             Some(Ok(r)) => (Some(r), None),
             Some(Err(e)) => (None, Some(e)),
@@ -535,16 +531,32 @@ impl Pipeline {
         }
     }
 
-    /// The multi-hypothesis refinement ([`crate::registration::refine`]) of the readings so far.
+    /// The multi-hypothesis refinement ([`crate::registration::refine`]) of the readings so far,
+    /// as the stop sees it ([`Budget::SCREENED`], what the calibration was fitted on).
     /// Deterministic: the confident rule's kept result is returned when the readings have
     /// not changed since.
     pub fn refine(&self, plan: &FloorPlan) -> Result<Refinement, RegistrationError> {
+        self.refine_within(plan, &Budget::SCREENED)
+    }
+
+    /// The refinement the episode ends with when none is kept (the oracle stop, or a
+    /// confident episode whose stop gate never opened): [`Budget::end_of_episode`], once
+    /// per episode, so it may spend more than the per-reading one.
+    pub fn refine_final(&self, plan: &FloorPlan) -> Result<Refinement, RegistrationError> {
+        self.refine_within(plan, &Budget::end_of_episode(self.params.heading_known()))
+    }
+
+    fn refine_within(
+        &self,
+        plan: &FloorPlan,
+        budget: &Budget,
+    ) -> Result<Refinement, RegistrationError> {
         if let Some((seen, r)) = self.last_refinement {
             if seen == self.refinement_key() && *plan == self.plan {
                 return Ok(r);
             }
         }
-        refine::refine(&self.refine_input(plan))
+        refine::refine_within(&self.refine_input(plan), budget)
     }
 
     /// What [`Pipeline::refine`] hands the refinement (readings, belief, parameters); the
@@ -560,7 +572,6 @@ impl Pipeline {
             starts: REGISTRATION_STARTS,
             unknowns: self.min_measurements(),
             model: RangeModel::default(),
-            sweep_iterations: SWEEP_ITERATIONS,
         }
     }
 

@@ -45,9 +45,9 @@
 //!   single leave-out still leaves unexplained. 7.3 k correspondences per refinement;
 //!   same mean pose error (0.3030 m against 0.3029 m, capped at 1 m) and right answer
 //!   cells (978 against 977 of 1213).
-//! * **A short sweep** (8 ICP iterations per start, [`RefineInput::sweep_iterations`]: it
+//! * **A short sweep** (8 ICP iterations per start, [`Budget::sweep_iterations`]: it
 //!   only picks the annealing's start), ICPs inside the annealing cut at
-//!   [`SCREENED_ICP_ITERATIONS`] and the final annealing at [`SCREENED_FULL_ROUNDS`] rounds,
+//!   [`Budget::icp_iterations`] and the final annealing at [`Budget::final_rounds`] rounds,
 //!   from the screened winner instead of a second sweep: 2.8 k correspondences, 0.3046 m,
 //!   977 right cells. (The ICP and round caps alone changed neither figure.)
 //! * **Carrying the previous reading's refinement** ([`refine_after`]) under the calibrated
@@ -134,9 +134,6 @@ pub struct RefineInput<'a> {
     pub unknowns: usize,
     /// The range model of the likelihood.
     pub model: RangeModel,
-    /// ICP iterations per heading-sweep start ([`registration::register_multistart_capped`];
-    /// the screened search only, [`Search::Exhaustive`] runs them to convergence).
-    pub sweep_iterations: u16,
 }
 
 /// PMF mass of the cells within one cell / bin of the cell holding `pose` (the coarse
@@ -191,7 +188,7 @@ fn hypothesis(
     params: &AnnealParams,
     centre: &Pose2,
     exclude: [u16; MAX_EXCLUDED],
-    search: Search,
+    budget: &Budget,
 ) -> Result<Refinement, RegistrationError> {
     let params = AnnealParams {
         icp: IcpParams {
@@ -200,10 +197,7 @@ fn hypothesis(
         },
         ..*params
     };
-    let sweep_iterations = match search {
-        Search::Exhaustive => u16::MAX,
-        Search::Screened => input.sweep_iterations,
-    };
+    let sweep_iterations = budget.sweep_iterations;
     let registration = registration::register_multistart_capped(
         input.plan,
         input.obs,
@@ -212,6 +206,7 @@ fn hypothesis(
         input.heading_span,
         input.starts,
         sweep_iterations,
+        budget.sweep_keep,
     )?;
     let fit = registration::range_fit(input.plan, input.obs, &registration.pose, &input.model);
     let log_prior = ln(neighbourhood_mass(input.localizer, &registration.pose).max(MIN_PRIOR_MASS));
@@ -233,20 +228,102 @@ fn keep_better(best: &mut Option<Refinement>, cand: Result<Refinement, Registrat
     }
 }
 
-/// How the refinement chooses its hypotheses.
+/// How the refinement chooses its hypotheses: the named [`Budget`]s.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Search {
-    /// Every leave-one-out set, and every leave-two-out set around the best single
-    /// leave-out; the winner re-registered from the belief argmax with the full annealing
-    /// after a heading sweep. What the refinement was before issue 22 (`1 + n + (n − 1)`
-    /// screened registrations and a full one); kept as the reference the screened search
-    /// is measured against.
+    /// [`Budget::EXHAUSTIVE`]: what the refinement was before issue 22; kept as the
+    /// reference the others are measured against.
     Exhaustive,
-    /// Leave out only readings the all-readings fit leaves unexplained (range likelihood,
-    /// [`registration::unexplained_readings`]), the worst [`SCREEN_CANDIDATES`] of them, and
-    /// a second one only around a winning single leave-out; the final annealing starts from
-    /// the screened winner. Issue 22: most refinements are then two registrations.
+    /// [`Budget::SCREENED`]: after every reading past the stop gate.
     Screened,
+}
+
+impl Search {
+    /// The budget this search spends.
+    pub const fn budget(self) -> Budget {
+        match self {
+            Search::Exhaustive => Budget::EXHAUSTIVE,
+            Search::Screened => Budget::SCREENED,
+        }
+    }
+}
+
+/// What one refinement may spend, and on what (issue 22). `u16::MAX` / `u8::MAX` leave a
+/// quantity to the registration parameters (or to convergence).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Budget {
+    /// Single leave-outs tried: the worst this many readings the all-readings fit leaves
+    /// unexplained ([`registration::unexplained_readings`]), and then a second one only
+    /// for the worst reading the winning single leave-out leaves unexplained. `u8::MAX`:
+    /// every reading, and every second one around the winning single leave-out.
+    pub leave_outs: u8,
+    /// ICP iterations per heading-sweep start ([`registration::register_multistart_capped`]):
+    /// the sweep only picks the annealing's start.
+    pub sweep_iterations: u16,
+    /// Sweep starts run on to convergence after the short sweep, the best first.
+    pub sweep_keep: u8,
+    /// ICP iterations inside each annealing round (an ICP that has not converged by then
+    /// oscillates between correspondence sets).
+    pub icp_iterations: u16,
+    /// Rounds of the winner's final annealing.
+    pub final_rounds: u16,
+    /// The final annealing starts where the screening left the winner (`true`), or again
+    /// from the belief argmax after a heading sweep (`false`, as before issue 22).
+    pub final_from_winner: bool,
+}
+
+impl Budget {
+    /// Every leave-one-out set, and every leave-two-out set around the best single
+    /// leave-out (`1 + n + (n − 1)` screened registrations), each after a heading sweep
+    /// run to convergence; the winner re-registered from the belief argmax with the full
+    /// annealing.
+    pub const EXHAUSTIVE: Budget = Budget {
+        leave_outs: u8::MAX,
+        sweep_iterations: u16::MAX,
+        sweep_keep: 0,
+        icp_iterations: u16::MAX,
+        final_rounds: u16::MAX,
+        final_from_winner: false,
+    };
+    /// Leave-outs only for the worst [`SCREEN_CANDIDATES`] unexplained readings, a short
+    /// sweep, capped ICPs and a short final annealing from the screened winner: most
+    /// refinements are then two registrations (module docs).
+    pub const SCREENED: Budget = Budget {
+        leave_outs: SCREEN_CANDIDATES as u8,
+        sweep_iterations: 8,
+        sweep_keep: 0,
+        icp_iterations: 30,
+        final_rounds: 10,
+        final_from_winner: true,
+    };
+
+    /// What the episode's last refinement spends when none was kept from the readings
+    /// before ([`crate::pipeline::Pipeline::refine_final`]). It runs once per episode, so it
+    /// buys back the accuracy the screened search loses (module docs, "The end of the
+    /// episode"): with the heading known every reading is left out in turn (no heading
+    /// sweep per hypothesis, so this is cheap); without, the worst three unexplained
+    /// readings, the two best sweep starts run on to convergence, and half the final
+    /// annealing (its other five rounds moved the mean pose error by 0.1 mm).
+    pub const fn end_of_episode(heading_known: bool) -> Budget {
+        if heading_known {
+            Budget {
+                leave_outs: u8::MAX,
+                ..Budget::SCREENED
+            }
+        } else {
+            Budget {
+                leave_outs: 3,
+                sweep_keep: 2,
+                final_rounds: 5,
+                ..Budget::SCREENED
+            }
+        }
+    }
+
+    /// Whether every leave-out is tried.
+    fn exhaustive_leave_outs(&self) -> bool {
+        self.leave_outs == u8::MAX
+    }
 }
 
 /// Single leave-outs the screened search tries: the worst unexplained readings.
@@ -257,48 +334,43 @@ fn refine_around(
     input: &RefineInput<'_>,
     centre: &Pose2,
     hypotheses: &mut u16,
-    search: Search,
+    budget: &Budget,
 ) -> Result<Refinement, RegistrationError> {
     let n = input.obs.len();
     let none = [NOT_EXCLUDED; MAX_EXCLUDED];
-    let full = hypothesis(input, &input.screen, centre, none, search);
+    let full = hypothesis(input, &input.screen, centre, none, budget);
     *hypotheses += 1;
     let all_pose = full.as_ref().ok().map(|r| r.registration.pose);
     let mut best = None;
     let first_error = full.err();
     keep_better(&mut best, full);
     if n <= LEAVE_OUT_MAX_READINGS && n > input.unknowns {
-        match search {
-            Search::Exhaustive => {
-                for i in 0..n {
-                    let mut ex = none;
-                    ex[0] = i as u16;
-                    keep_better(
-                        &mut best,
-                        hypothesis(input, &input.screen, centre, ex, search),
-                    );
-                    *hypotheses += 1;
-                }
+        if budget.exhaustive_leave_outs() {
+            for i in 0..n {
+                let mut ex = none;
+                ex[0] = i as u16;
+                keep_better(
+                    &mut best,
+                    hypothesis(input, &input.screen, centre, ex, budget),
+                );
+                *hypotheses += 1;
             }
-            Search::Screened => {
-                if let Some(pose) = all_pose {
-                    let worst = registration::unexplained_readings::<SCREEN_CANDIDATES>(
-                        input.plan,
-                        input.obs,
-                        &pose,
-                        &input.model,
-                        &[],
-                    );
-                    for &i in worst.iter() {
-                        let mut ex = none;
-                        ex[0] = i;
-                        keep_better(
-                            &mut best,
-                            hypothesis(input, &input.screen, centre, ex, search),
-                        );
-                        *hypotheses += 1;
-                    }
-                }
+        } else if let Some(pose) = all_pose {
+            let worst = registration::unexplained_readings::<LEAVE_OUT_MAX_READINGS>(
+                input.plan,
+                input.obs,
+                &pose,
+                &input.model,
+                &[],
+            );
+            for &i in worst.iter().take(budget.leave_outs as usize) {
+                let mut ex = none;
+                ex[0] = i;
+                keep_better(
+                    &mut best,
+                    hypothesis(input, &input.screen, centre, ex, budget),
+                );
+                *hypotheses += 1;
             }
         }
         // A second outlier: leave out one more, around the best single leave-out.
@@ -307,31 +379,28 @@ fn refine_around(
             .filter(|b| b.excluded_count() == 1)
             .map(|b| (b.excluded[0], b.registration.pose));
         if let Some((i, pose)) = single.filter(|_| n > input.unknowns + 1) {
-            match search {
-                Search::Exhaustive => {
-                    for j in (0..n as u16).filter(|&j| j != i) {
-                        keep_better(
-                            &mut best,
-                            hypothesis(input, &input.screen, centre, [i, j], search),
-                        );
-                        *hypotheses += 1;
-                    }
-                }
-                Search::Screened => {
-                    let worst = registration::unexplained_readings::<1>(
-                        input.plan,
-                        input.obs,
-                        &pose,
-                        &input.model,
-                        &[i],
+            if budget.exhaustive_leave_outs() {
+                for j in (0..n as u16).filter(|&j| j != i) {
+                    keep_better(
+                        &mut best,
+                        hypothesis(input, &input.screen, centre, [i, j], budget),
                     );
-                    for &j in worst.iter() {
-                        keep_better(
-                            &mut best,
-                            hypothesis(input, &input.screen, centre, [i, j], search),
-                        );
-                        *hypotheses += 1;
-                    }
+                    *hypotheses += 1;
+                }
+            } else {
+                let worst = registration::unexplained_readings::<1>(
+                    input.plan,
+                    input.obs,
+                    &pose,
+                    &input.model,
+                    &[i],
+                );
+                for &j in worst.iter() {
+                    keep_better(
+                        &mut best,
+                        hypothesis(input, &input.screen, centre, [i, j], budget),
+                    );
+                    *hypotheses += 1;
                 }
             }
         }
@@ -346,52 +415,48 @@ fn refine_around(
 /// The multi-hypothesis refinement (module docs) around the belief argmax; `Err` when no
 /// hypothesis registers (fewer than two readings, invalid parameters) or before any vote.
 pub fn refine(input: &RefineInput<'_>) -> Result<Refinement, RegistrationError> {
-    refine_with(input, Search::Screened)
+    refine_within(input, &Budget::SCREENED)
 }
-
-/// ICP iterations per annealing round of the screened search (an ICP that has not
-/// converged by then oscillates between correspondence sets).
-pub const SCREENED_ICP_ITERATIONS: u16 = 30;
-/// Rounds of the screened search's final annealing (it starts at the screened winner).
-pub const SCREENED_FULL_ROUNDS: u16 = 10;
 
 /// [`refine`] with the hypothesis search `search`.
 pub fn refine_with(
     input: &RefineInput<'_>,
     search: Search,
 ) -> Result<Refinement, RegistrationError> {
-    if search == Search::Screened {
-        let cap = |p: &AnnealParams, rounds: u16| AnnealParams {
-            icp: IcpParams {
-                max_iterations: p.icp.max_iterations.min(SCREENED_ICP_ITERATIONS),
-                ..p.icp
-            },
-            max_rounds: p.max_rounds.min(rounds),
-            ..*p
-        };
-        let capped = RefineInput {
-            params: cap(&input.params, SCREENED_FULL_ROUNDS),
-            screen: cap(&input.screen, u16::MAX),
-            ..*input
-        };
-        return refine_search(&capped, search);
-    }
-    refine_search(input, search)
+    refine_within(input, &search.budget())
 }
 
-fn refine_search(input: &RefineInput<'_>, search: Search) -> Result<Refinement, RegistrationError> {
+/// [`refine`] within `budget`.
+pub fn refine_within(
+    input: &RefineInput<'_>,
+    budget: &Budget,
+) -> Result<Refinement, RegistrationError> {
+    let cap = |p: &AnnealParams, rounds: u16| AnnealParams {
+        icp: IcpParams {
+            max_iterations: p.icp.max_iterations.min(budget.icp_iterations),
+            ..p.icp
+        },
+        max_rounds: p.max_rounds.min(rounds),
+        ..*p
+    };
+    let input = RefineInput {
+        params: cap(&input.params, budget.final_rounds),
+        screen: cap(&input.screen, u16::MAX),
+        ..*input
+    };
     let Some(argmax) = input.localizer.argmax() else {
         return Err(RegistrationError::TooFewObservations);
     };
     let centre = input.localizer.grid().pose_of(argmax);
     let mut hypotheses = 0u16;
-    let best = refine_around(input, &centre, &mut hypotheses, search)?;
-    let mut out = match search {
-        // The winner, registered again with the full annealing.
-        Search::Exhaustive => hypothesis(input, &input.params, &centre, best.excluded, search)?,
+    let best = refine_around(&input, &centre, &mut hypotheses, budget)?;
+    let mut out = if budget.final_from_winner {
         // The full annealing from where the screening left the winner (its sweep and
         // screened annealing are not repeated).
-        Search::Screened => finish_from(input, &centre, &best)?,
+        finish_from(&input, &centre, &best)?
+    } else {
+        // The winner, registered again with the full annealing.
+        hypothesis(&input, &input.params, &centre, best.excluded, budget)?
     };
     out.hypotheses = hypotheses + 1;
     Ok(out)
@@ -419,7 +484,11 @@ pub fn refine_after(
             let screen = AnnealParams {
                 icp: IcpParams {
                     exclude: previous.excluded,
-                    max_iterations: input.screen.icp.max_iterations.min(SCREENED_ICP_ITERATIONS),
+                    max_iterations: input
+                        .screen
+                        .icp
+                        .max_iterations
+                        .min(Budget::SCREENED.icp_iterations),
                     ..input.screen.icp
                 },
                 ..input.screen
@@ -540,12 +609,11 @@ mod tests {
             starts: 1,
             unknowns: 2,
             model: RangeModel::default(),
-            sweep_iterations: u16::MAX,
         };
         // Refine around the truth's cell directly (a coarse success; the belief's own
         // argmax may be a neighbour with three votes this sparse).
         let mut n = 0;
-        let r = refine_around(&input, &centre, &mut n, Search::Exhaustive).unwrap();
+        let r = refine_around(&input, &centre, &mut n, &Budget::EXHAUSTIVE).unwrap();
         assert_eq!(r.excluded, [2, NOT_EXCLUDED]);
         assert_eq!(r.fit.explained, 2);
         assert_eq!(
