@@ -48,7 +48,9 @@ fn args(link: GeoComLink, plan: &Path, room: Option<String>, agent: AgentKind) -
 
 /// The simulator for the room `a` names, as `activesense geocom-sim` builds it.
 fn sim_config(a: &StationArgs, faults: Vec<FaultSpec>) -> SimConfig {
-    let named = planfile::load_plan(&a.plan, &a.read.options()).unwrap().plan;
+    let named = planfile::load_plan(&a.plan, &a.read.options())
+        .unwrap()
+        .plan;
     let mut spec = EpisodeSpec::new(named.seed(), a.agent);
     spec.episode_seed = a.episode_seed;
     SimConfig {
@@ -82,7 +84,10 @@ fn reference(a: &StationArgs) -> StationReport {
     StationReport::new(&name, None, &o)
 }
 
-fn through_sim(mut a: StationArgs, faults: Vec<FaultSpec>) -> (anyhow::Result<StationReport>, SimState) {
+fn through_sim(
+    mut a: StationArgs,
+    faults: Vec<FaultSpec>,
+) -> (anyhow::Result<StationReport>, SimState) {
     let (link, state) = start_tcp(sim_config(&a, faults));
     a.link = link;
     let r = station(&a).map(|mut r| {
@@ -95,7 +100,10 @@ fn through_sim(mut a: StationArgs, faults: Vec<FaultSpec>) -> (anyhow::Result<St
 
 fn every_fixture_room() -> Vec<(PathBuf, Option<String>)> {
     let mut out = Vec::new();
-    let mut files: Vec<_> = std::fs::read_dir(fixtures()).unwrap().map(|e| e.unwrap().path()).collect();
+    let mut files: Vec<_> = std::fs::read_dir(fixtures())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
     files.sort();
     for f in files {
         let rooms = planfile::load_rooms(&f, &LoadOptions::default()).unwrap();
@@ -148,7 +156,10 @@ fn tcp_answers_are_bit_identical_on_every_fixture_room_and_generated_plans() {
         assert!(!got.readings.is_empty());
         // The session leaves the EDM off and the motor still.
         assert!(!state.edm_on && !state.moving);
-        assert_eq!(state.station, [0.0; 4], "nothing written without --set-station");
+        assert_eq!(
+            state.station, [0.0; 4],
+            "nothing written without --set-station"
+        );
     }
 }
 
@@ -169,7 +180,10 @@ fn learnt_float_and_int8_policies_are_bit_identical_through_the_simulator() {
 #[test]
 fn pty_answers_are_bit_identical() {
     let dir = tmpdir("pty");
-    let mut rooms = vec![(fixtures().join("l-room.dxf"), None), (fixtures().join("offices.geojson"), Some("1".to_owned()))];
+    let mut rooms = vec![
+        (fixtures().join("l-room.dxf"), None),
+        (fixtures().join("offices.geojson"), Some("1".to_owned())),
+    ];
     rooms.push((generated_plan_files(&dir, 1).remove(0), None));
     for (file, room) in rooms {
         let mut a = args(dummy(), &file, room, AgentKind::Heuristic1);
@@ -225,7 +239,10 @@ fn no_distance_and_no_signal_are_no_returns() {
     let file = fixtures().join("l-room.json");
     let want = reference(&args(dummy(), &file, None, AgentKind::Heuristic1));
     for f in ["no-distance@2108:1", "no-signal@2108:2"] {
-        let (got, state) = through_sim(args(dummy(), &file, None, AgentKind::Heuristic1), vec![spec(f)]);
+        let (got, state) = through_sim(
+            args(dummy(), &file, None, AgentKind::Heuristic1),
+            vec![spec(f)],
+        );
         let got = got.unwrap_or_else(|e| panic!("{f}: {e}"));
         assert_eq!(state.fired.len(), 1, "{f}");
         // The first readings match the reference except the one lost.
@@ -240,20 +257,45 @@ fn no_distance_and_no_signal_are_no_returns() {
 fn fatal_faults_end_with_the_instrument_still() {
     let file = fixtures().join("l-room.json");
     let cases: &[(&[&str], &str, &str)] = &[
-        (&["motor@9027:3"], "AUT_MakePositioning (RPC 9027)", "GRC_AUT_MOTOR_ERROR"),
         (
-            &["timeout@9027:2", "timeout@9027:3", "timeout@9027:4", "timeout@9027:5"],
+            &["motor@9027:3"],
+            "AUT_MakePositioning (RPC 9027)",
+            "GRC_AUT_MOTOR_ERROR",
+        ),
+        (
+            &[
+                "timeout@9027:2",
+                "timeout@9027:3",
+                "timeout@9027:4",
+                "timeout@9027:5",
+            ],
             "AUT_MakePositioning (RPC 9027)",
             "time-out",
         ),
         (
-            &["busy@2108:1", "busy@2108:2", "busy@2108:3", "busy@2108:4", "busy@2108:5", "busy@2108:6",
-              "busy@2108:7", "busy@2108:8", "busy@2108:9", "busy@2108:10", "busy@2108:11"],
+            &[
+                "busy@2108:1",
+                "busy@2108:2",
+                "busy@2108:3",
+                "busy@2108:4",
+                "busy@2108:5",
+                "busy@2108:6",
+                "busy@2108:7",
+                "busy@2108:8",
+                "busy@2108:9",
+                "busy@2108:10",
+                "busy@2108:11",
+            ],
             "TMC_GetSimpleMea (RPC 2108)",
             "busy",
         ),
         (
-            &["garbled@2008:1", "garbled@2008:2", "garbled@2008:3", "garbled@2008:4"],
+            &[
+                "garbled@2008:1",
+                "garbled@2008:2",
+                "garbled@2008:3",
+                "garbled@2008:4",
+            ],
             "TMC_DoMeasure (RPC 2008)",
             "garbled",
         ),
@@ -267,7 +309,12 @@ fn fatal_faults_end_with_the_instrument_still() {
         assert!(msg.contains(rpc) && msg.contains(what), "{msg}");
         assert!(msg.contains("left still, EDM off"), "{msg}");
         assert!(!state.edm_on && !state.moving, "{faults:?}");
-        assert_eq!(state.log[state.log.len() - 3..], [2008, 1004, 6002], "{faults:?}: {:?}", &state.log);
+        assert_eq!(
+            state.log[state.log.len() - 3..],
+            [2008, 1004, 6002],
+            "{faults:?}: {:?}",
+            &state.log
+        );
     }
 }
 
@@ -286,10 +333,19 @@ fn set_station_writes_the_pose_and_orientation() {
     assert_eq!(state.station[1], y as f64);
     // Against the simulator's truth: position within 5 cm, orientation within 0.5°.
     let [tx, ty, th] = state.truth;
-    assert!(((x - tx).powi(2) + (y - ty).powi(2)).sqrt() < 0.05, "{x} {y} vs {tx} {ty}");
-    let want = (std::f64::consts::FRAC_PI_2 - th as f64 - state.hz_start).rem_euclid(std::f64::consts::TAU);
-    let d = (state.orientation - want + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
-    assert!(d.abs() < 0.5f64.to_radians(), "orientation {} vs {want}", state.orientation);
+    assert!(
+        ((x - tx).powi(2) + (y - ty).powi(2)).sqrt() < 0.05,
+        "{x} {y} vs {tx} {ty}"
+    );
+    let want = (std::f64::consts::FRAC_PI_2 - th as f64 - state.hz_start)
+        .rem_euclid(std::f64::consts::TAU);
+    let d = (state.orientation - want + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    assert!(
+        d.abs() < 0.5f64.to_radians(),
+        "orientation {} vs {want}",
+        state.orientation
+    );
 }
 
 #[test]

@@ -4,7 +4,9 @@
 
 use super::SensorArgs;
 use crate::episode::{parse_agent, parse_stop_risk, EpisodeSpec};
-use crate::geocom::client::{Client, ClientConfig, SerialTransport, TcpTransport, Transport, DEFAULT_BAUD};
+use crate::geocom::client::{
+    Client, ClientConfig, SerialTransport, TcpTransport, Transport, DEFAULT_BAUD,
+};
 use crate::geocom::instrument::{
     run_session, with_policy, GeoComInstrument, InstrumentInfo, SessionError, SessionOutcome,
     SessionSetup, SessionStep, ROT_BINS,
@@ -35,19 +37,24 @@ pub enum GeoComLink {
 impl std::str::FromStr for GeoComLink {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        let usage = || format!("link '{s}': expected geocom:serial:PATH[:BAUD] or geocom:tcp:HOST:PORT");
+        let usage =
+            || format!("link '{s}': expected geocom:serial:PATH[:BAUD] or geocom:tcp:HOST:PORT");
         let rest = s.strip_prefix("geocom:").ok_or_else(usage)?;
         if let Some(addr) = rest.strip_prefix("tcp:") {
-            if addr.rsplit_once(':').is_none_or(|(_, p)| p.parse::<u16>().is_err()) {
+            if addr
+                .rsplit_once(':')
+                .is_none_or(|(_, p)| p.parse::<u16>().is_err())
+            {
                 return Err(usage());
             }
             return Ok(GeoComLink::Tcp(addr.to_owned()));
         }
         let path = rest.strip_prefix("serial:").ok_or_else(usage)?;
         match path.rsplit_once(':') {
-            Some((p, b)) if !p.is_empty() && b.parse::<u32>().is_ok() => {
-                Ok(GeoComLink::Serial(p.to_owned(), b.parse().map_err(|_| usage())?))
-            }
+            Some((p, b)) if !p.is_empty() && b.parse::<u32>().is_ok() => Ok(GeoComLink::Serial(
+                p.to_owned(),
+                b.parse().map_err(|_| usage())?,
+            )),
             _ if !path.is_empty() => Ok(GeoComLink::Serial(path.to_owned(), DEFAULT_BAUD)),
             _ => Err(usage()),
         }
@@ -58,12 +65,14 @@ impl GeoComLink {
     /// Opens the transport.
     pub fn open(&self) -> Result<Box<dyn Transport>> {
         Ok(match self {
-            GeoComLink::Tcp(a) => Box::new(
-                TcpTransport::connect(a).with_context(|| format!("cannot connect to tcp:{a} (is the instrument or geocom-sim listening?)"))?,
-            ),
-            GeoComLink::Serial(p, b) => Box::new(
-                SerialTransport::open(p, *b).with_context(|| format!("cannot open serial port {p} (check the cable and permissions)"))?,
-            ),
+            GeoComLink::Tcp(a) => Box::new(TcpTransport::connect(a).with_context(|| {
+                format!("cannot connect to tcp:{a} (is the instrument or geocom-sim listening?)")
+            })?),
+            GeoComLink::Serial(p, b) => {
+                Box::new(SerialTransport::open(p, *b).with_context(|| {
+                    format!("cannot open serial port {p} (check the cable and permissions)")
+                })?)
+            }
         })
     }
 }
@@ -220,7 +229,11 @@ impl StationReport {
             self.answer_readings,
             self.actions,
             self.risk.map_or("-".into(), |r| format!("{r:.3}")),
-            if self.stopped { "calibrated stop" } else { "action limit" }
+            if self.stopped {
+                "calibrated stop"
+            } else {
+                "action limit"
+            }
         );
         if self.symmetry_order > 1 {
             println!(
@@ -254,11 +267,16 @@ impl StationReport {
             ),
         };
         if !self.stopped && self.risk.is_none_or(|r| r > max_risk) {
-            bail!("the answer is not confident (risk {:?} above {max_risk}): nothing written", self.risk);
+            bail!(
+                "the answer is not confident (risk {:?} above {max_risk}): nothing written",
+                self.risk
+            );
         }
         let [x, y, t] = cands[k];
         let az = (FRAC_PI_2 - (t + self.final_bearing as f64)).rem_euclid(TAU);
-        let e = |e: crate::geocom::client::GeoComError| anyhow::anyhow!("writing the station failed: {e}");
+        let e = |e: crate::geocom::client::GeoComError| {
+            anyhow::anyhow!("writing the station failed: {e}")
+        };
         rpc::do_measure(client, rpc::tmc_prog::CLEAR).map_err(e)?;
         let old = rpc::get_station(client).map_err(e)?;
         let station = [x + plan_shift.0, y + plan_shift.1, old[2], old[3]];
@@ -326,7 +344,11 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
         ..Default::default()
     };
     let client = Client::new(a.link.open()?, config);
-    let (mut inst, info) = match GeoComInstrument::connect(client, setup.config, a.vertical_deg.map(f64::to_radians)) {
+    let (mut inst, info) = match GeoComInstrument::connect(
+        client,
+        setup.config,
+        a.vertical_deg.map(f64::to_radians),
+    ) {
         Ok(x) => x,
         Err((mut c, e)) => {
             let still = rpc::safe_state(&mut c);
@@ -375,7 +397,10 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
         eprintln!("warning: {}", still_note(&still));
     }
     if let Some(p) = &a.json {
-        super::write_file(p, &serde_json::to_string_pretty(&(&report, &outcome.steps))?)?;
+        super::write_file(
+            p,
+            &serde_json::to_string_pretty(&(&report, &outcome.steps))?,
+        )?;
     }
     if let Some(Err(e)) = written {
         return Err(e);
@@ -388,7 +413,10 @@ fn still_note(errs: &[crate::geocom::client::GeoComError]) -> String {
         "instrument left still, EDM off".to_owned()
     } else {
         let e: Vec<String> = errs.iter().map(|e| e.to_string()).collect();
-        format!("could not confirm the instrument is still and the EDM off ({})", e.join("; "))
+        format!(
+            "could not confirm the instrument is still and the EDM off ({})",
+            e.join("; ")
+        )
     }
 }
 
@@ -458,7 +486,9 @@ pub fn run_sim(a: GeocomSimArgs) -> Result<()> {
         #[cfg(unix)]
         {
             let (path, _) = crate::geocom::sim::serve_pty(sim)?;
-            println!("geocom-sim: room {name} on pty {path} (connect with --link geocom:serial:{path})");
+            println!(
+                "geocom-sim: room {name} on pty {path} (connect with --link geocom:serial:{path})"
+            );
             loop {
                 std::thread::sleep(Duration::from_secs(3600));
             }
@@ -470,7 +500,8 @@ pub fn run_sim(a: GeocomSimArgs) -> Result<()> {
     let addr = listen
         .strip_prefix("tcp:")
         .with_context(|| format!("--listen {listen}: expected tcp:HOST:PORT"))?;
-    let listener = std::net::TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
+    let listener =
+        std::net::TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
     let local = listener.local_addr()?;
     println!("geocom-sim: room {name} on tcp:{local} (connect with --link geocom:tcp:{local})");
     crate::geocom::sim::serve_tcp(listener, sim)?;

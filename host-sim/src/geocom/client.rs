@@ -67,7 +67,8 @@ impl Write for TcpTransport {
 }
 impl Transport for TcpTransport {
     fn set_read_timeout(&mut self, t: Duration) -> io::Result<()> {
-        self.stream.set_read_timeout(Some(t.max(Duration::from_millis(1))))
+        self.stream
+            .set_read_timeout(Some(t.max(Duration::from_millis(1))))
     }
     fn reconnect(&mut self) -> io::Result<()> {
         let t = self.stream.read_timeout()?;
@@ -221,7 +222,13 @@ pub struct GeoComError {
 
 impl std::fmt::Display for GeoComError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} (RPC {}): {}", rpc_name(self.rpc), self.rpc, self.fault)
+        write!(
+            f,
+            "{} (RPC {}): {}",
+            rpc_name(self.rpc),
+            self.rpc,
+            self.fault
+        )
     }
 }
 
@@ -238,7 +245,13 @@ pub struct Event {
 
 impl std::fmt::Display for Event {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} (RPC {}): {}", rpc_name(self.rpc), self.rpc, self.what)
+        write!(
+            f,
+            "{} (RPC {}): {}",
+            rpc_name(self.rpc),
+            self.rpc,
+            self.what
+        )
     }
 }
 
@@ -351,7 +364,9 @@ impl Client {
                 Err(e)
                     if matches!(
                         e.kind(),
-                        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+                        io::ErrorKind::TimedOut
+                            | io::ErrorKind::WouldBlock
+                            | io::ErrorKind::Interrupted
                     ) => {}
                 Err(e) => return Err(Attempt::Dropped(e.to_string())),
             }
@@ -387,7 +402,13 @@ impl Client {
             };
             if reply.header.trid.is_some_and(|t| t != trid) {
                 // A late reply to an earlier, repeated request: not ours.
-                self.event(rpc, format!("dropped a stale reply (transaction {:?})", reply.header.trid));
+                self.event(
+                    rpc,
+                    format!(
+                        "dropped a stale reply (transaction {:?})",
+                        reply.header.trid
+                    ),
+                );
                 continue;
             }
             if self.config.crc && !reply.header.crc_ok {
@@ -451,7 +472,10 @@ impl Client {
                     match self.io.reconnect() {
                         Ok(()) => {
                             self.pending.clear();
-                            self.event(rpc, format!("connection dropped ({e}): reconnected, repeating"));
+                            self.event(
+                                rpc,
+                                format!("connection dropped ({e}): reconnected, repeating"),
+                            );
                             continue;
                         }
                         Err(e2) => {
@@ -474,7 +498,13 @@ impl Client {
                 Fault::Com(c) => c.name().to_owned(),
                 f => f.to_string(),
             };
-            self.event(rpc, format!("{what}: resynchronised, repeating ({retries}/{})", self.config.retries));
+            self.event(
+                rpc,
+                format!(
+                    "{what}: resynchronised, repeating ({retries}/{})",
+                    self.config.retries
+                ),
+            );
             self.resync();
         }
     }

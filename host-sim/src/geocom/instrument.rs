@@ -283,9 +283,9 @@ pub fn run_session<I: Instrument>(
     on_step: &mut dyn FnMut(&SessionStep),
 ) -> Result<SessionOutcome, SessionError<I::Error>> {
     let mut runner = Box::new(EpisodeRunner::new_empty());
-    runner
-        .start(&setup.plan, &setup.params())
-        .map_err(|e| SessionError::Rejected(format!("the plan does not fit the pipeline: {e:?}")))?;
+    runner.start(&setup.plan, &setup.params()).map_err(|e| {
+        SessionError::Rejected(format!("the plan does not fit the pipeline: {e:?}"))
+    })?;
     let mut steps = Vec::new();
     while let Some(action) = runner.decide(policy) {
         let obs: Observation = inst.perform(action).map_err(SessionError::Instrument)?;

@@ -17,6 +17,8 @@ pub const COM_GET_SW_VERSION: u16 = 110;
 pub const CSV_GET_INSTRUMENT_NO: u16 = 5003;
 /// CSV_GetInstrumentName: instrument name.
 pub const CSV_GET_INSTRUMENT_NAME: u16 = 5004;
+/// CSV_GetSWVersion: instrument firmware release, version, subversion.
+pub const CSV_GET_SW_VERSION: u16 = 5034;
 /// EDM_Laserpointer: the visible laser on/off.
 pub const EDM_LASERPOINTER: u16 = 1004;
 /// TMC_GetAngle5: Hz, V (simple angle measurement).
@@ -52,6 +54,7 @@ pub fn rpc_name(rpc: u16) -> &'static str {
         COM_GET_SW_VERSION => "COM_GetSWVersion",
         CSV_GET_INSTRUMENT_NO => "CSV_GetInstrumentNo",
         CSV_GET_INSTRUMENT_NAME => "CSV_GetInstrumentName",
+        CSV_GET_SW_VERSION => "CSV_GetSWVersion",
         EDM_LASERPOINTER => "EDM_Laserpointer",
         TMC_GET_ANGLE5 => "TMC_GetAngle5",
         TMC_DO_MEASURE => "TMC_DoMeasure",
@@ -195,7 +198,12 @@ pub fn get_angle(c: &mut Client) -> Result<(f64, f64), GeoComError> {
 
 /// TMC_DoMeasure(prog, TMC_AUTO_INC).
 pub fn do_measure(c: &mut Client, prog: i64) -> Result<(), GeoComError> {
-    plain(c, TMC_DO_MEASURE, &[Param::Int(prog), Param::Int(TMC_AUTO_INC)]).map(drop)
+    plain(
+        c,
+        TMC_DO_MEASURE,
+        &[Param::Int(prog), Param::Int(TMC_AUTO_INC)],
+    )
+    .map(drop)
 }
 
 /// One distance reading.
@@ -275,6 +283,8 @@ pub fn set_orientation(c: &mut Client, hz: f64) -> Result<(), GeoComError> {
 }
 
 /// Leaves the instrument still with the EDM off: TMC_DoMeasure(TMC_CLEAR),
+/// CSV_GetSWVersion: instrument firmware release, version, subversion.
+pub const CSV_GET_SW_VERSION: u16 = 5034;
 /// EDM_Laserpointer(off), MOT_StopController(MOT_NORMAL). Best effort: every call is made
 /// even if an earlier one fails; the failures are returned.
 pub fn safe_state(c: &mut Client) -> Vec<GeoComError> {

@@ -66,7 +66,10 @@ impl FaultKind {
 
     /// The CLI name.
     pub fn name(self) -> &'static str {
-        Self::NAMES.iter().find(|n| n.1 == self).map_or("?", |n| n.0)
+        Self::NAMES
+            .iter()
+            .find(|n| n.1 == self)
+            .map_or("?", |n| n.0)
     }
 }
 
@@ -278,7 +281,11 @@ impl GeoComSim {
         };
         let s = self.v.sin();
         // A level telescope (sin V = 1) returns the world's range exactly.
-        self.last = Some(horizontal.filter(|_| s.abs() > 0.1).map(|h| h as f64 / s.abs()));
+        self.last = Some(
+            horizontal
+                .filter(|_| s.abs() > 0.1)
+                .map(|h| h as f64 / s.abs()),
+        );
         self.with_state(|st| st.edm_on = true);
     }
 
@@ -315,6 +322,7 @@ impl GeoComSim {
             COM_NULLPROC => (0, vec![]),
             COM_GET_DOUBLE_PRECISION => (0, vec![Param::Int(15)]),
             COM_GET_SW_VERSION => (0, vec![Param::Int(1), Param::Int(50), Param::Int(0)]),
+            CSV_GET_SW_VERSION => (0, vec![Param::Int(0), Param::Int(1), Param::Int(0)]),
             CSV_GET_INSTRUMENT_NO => (0, vec![Param::Int(4_242_424)]),
             CSV_GET_INSTRUMENT_NAME => (0, vec![Param::Str("activesense geocom-sim".into())]),
             BAP_SET_TARGET_TYPE => match int(0) {
@@ -430,13 +438,25 @@ impl GeoComSim {
                 return Out::Line(wire::emit_reply(0, trid, crc, ReturnCode::TMC_BUSY.0, ""))
             }
             Some(FaultKind::Motor) if rpc == AUT_MAKE_POSITIONING => {
-                return Out::Line(wire::emit_reply(0, trid, crc, ReturnCode::AUT_MOTOR_ERROR.0, ""))
+                return Out::Line(wire::emit_reply(
+                    0,
+                    trid,
+                    crc,
+                    ReturnCode::AUT_MOTOR_ERROR.0,
+                    "",
+                ))
             }
             _ => {}
         }
         let (mut rc, mut vals) = self.execute(rpc, &req.params);
         if rc == u16::MAX {
-            return Out::Line(wire::emit_reply(ReturnCode::COM_PROC_UNAVAIL.0, trid, crc, 0, ""));
+            return Out::Line(wire::emit_reply(
+                ReturnCode::COM_PROC_UNAVAIL.0,
+                trid,
+                crc,
+                0,
+                "",
+            ));
         }
         let mea = matches!(rpc, TMC_GET_SIMPLE_MEA | BAP_MEAS_DISTANCE_ANGLE);
         match fault {
@@ -458,7 +478,9 @@ impl GeoComSim {
         let values = wire::format_values(&vals).unwrap_or_default();
         let line = wire::emit_reply(0, trid, crc, rc, &values);
         match fault {
-            Some(FaultKind::Garbled) => Out::Line(line.replacen(':', "#\u{7f}", 1).replace('%', "?")),
+            Some(FaultKind::Garbled) => {
+                Out::Line(line.replacen(':', "#\u{7f}", 1).replace('%', "?"))
+            }
             Some(FaultKind::Truncated) => Out::Partial(line[..line.len() / 2].to_owned()),
             Some(FaultKind::Crc) => {
                 // A reply CRC that cannot match (the line's own plus one).
@@ -508,7 +530,9 @@ impl GeoComSim {
                 Err(e)
                     if matches!(
                         e.kind(),
-                        io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+                        io::ErrorKind::TimedOut
+                            | io::ErrorKind::WouldBlock
+                            | io::ErrorKind::Interrupted
                     ) => {}
                 Err(e) if e.kind() == io::ErrorKind::BrokenPipe => return Ok(true),
                 Err(e) => return Err(e),

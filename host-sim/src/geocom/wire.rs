@@ -295,7 +295,11 @@ pub fn parse_reply(line: &str) -> Result<Reply, WireError> {
 pub fn real(field: &str) -> Option<f64> {
     let t = field.trim();
     // `f64::from_str` also takes "inf"/"NaN"; an instrument never sends those.
-    if t.is_empty() || !t.bytes().all(|b| b.is_ascii_digit() || b"+-.eE".contains(&b)) {
+    if t.is_empty()
+        || !t
+            .bytes()
+            .all(|b| b.is_ascii_digit() || b"+-.eE".contains(&b))
+    {
         return None;
     }
     t.parse::<f64>().ok().filter(|x| x.is_finite())

@@ -17,11 +17,13 @@ import math
 exe, plan = sys.argv[1], sys.argv[2]
 sim = subprocess.Popen(
     [exe, "geocom-sim", "--plan", plan, "--listen", "tcp:127.0.0.1:0", "--edm-ms", "0"],
-    stdout=subprocess.PIPE, text=True)
+    stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
 line = sim.stdout.readline()
 port = int(re.search(r"tcp:127\.0\.0\.1:(\d+)", line).group(1))
 print("simulator:", line.strip())
 
+import atexit
+atexit.register(sim.kill)
 fail = 0
 def check(cond, what):
     global fail
@@ -57,6 +59,7 @@ r = ask("%R1Q,2008,6:3,1")               # TMC_DoMeasure(TMC_CLEAR)
 check(r == "%R1P,0,6:0", "TMC_DoMeasure(TMC_CLEAR)")
 r = ask("%R1Q,4242,8:")                  # no such RPC
 check(r.startswith("%R1P,3081,8:"), "unknown RPC: GRC_COM_PROC_UNAVAIL")
+f.close()
 s.close()
 
 # --- 2. GeoComPy ----------------------------------------------------------------------
