@@ -64,29 +64,7 @@ impl GeoComInstrument {
         config: EpisodeConfig,
         vertical: Option<f64>,
     ) -> Result<(Self, InstrumentInfo), (Client, GeoComError)> {
-        let r = (|| {
-            rpc::null_proc(&mut client)?;
-            let name = rpc::instrument_name(&mut client)?;
-            let serial = rpc::serial_no(&mut client)?;
-            let (a, b, c) = rpc::sw_version(&mut client)?;
-            rpc::set_reflectorless(&mut client)?;
-            rpc::set_edm_mode(&mut client, rpc::EDM_SINGLE_STANDARD)?;
-            let (hz0, _) = rpc::get_angle(&mut client)?;
-            let v = vertical.unwrap_or(FRAC_PI_2);
-            let fast = client.config().timeout;
-            client.set_timeout(SLOW_TIMEOUT.max(fast));
-            rpc::make_positioning(&mut client, hz0, v)?;
-            client.set_timeout(fast);
-            Ok((
-                InstrumentInfo {
-                    name,
-                    serial,
-                    geocom_version: format!("{a}.{b}.{c}"),
-                    hz0,
-                },
-                v,
-            ))
-        })();
+        let r = Self::hello(&mut client, vertical);
         match r {
             Ok((info, v)) => Ok((
                 GeoComInstrument {
@@ -100,6 +78,34 @@ impl GeoComInstrument {
             )),
             Err(e) => Err((client, e)),
         }
+    }
+
+    /// The opening RPCs of [`GeoComInstrument::connect`].
+    fn hello(
+        client: &mut Client,
+        vertical: Option<f64>,
+    ) -> Result<(InstrumentInfo, f64), GeoComError> {
+        rpc::null_proc(client)?;
+        let name = rpc::instrument_name(client)?;
+        let serial = rpc::serial_no(client)?;
+        let (a, b, c) = rpc::sw_version(client)?;
+        rpc::set_reflectorless(client)?;
+        rpc::set_edm_mode(client, rpc::EDM_SINGLE_STANDARD)?;
+        let (hz0, _) = rpc::get_angle(client)?;
+        let v = vertical.unwrap_or(FRAC_PI_2);
+        let fast = client.config().timeout;
+        client.set_timeout(SLOW_TIMEOUT.max(fast));
+        rpc::make_positioning(client, hz0, v)?;
+        client.set_timeout(fast);
+        Ok((
+            InstrumentInfo {
+                name,
+                serial,
+                geocom_version: format!("{a}.{b}.{c}"),
+                hz0,
+            },
+            v,
+        ))
     }
 
     /// The Hz that encoder bearing `b` (rad, counter-clockwise) stands at.

@@ -283,8 +283,6 @@ pub fn set_orientation(c: &mut Client, hz: f64) -> Result<(), GeoComError> {
 }
 
 /// Leaves the instrument still with the EDM off: TMC_DoMeasure(TMC_CLEAR),
-/// CSV_GetSWVersion: instrument firmware release, version, subversion.
-pub const CSV_GET_SW_VERSION: u16 = 5034;
 /// EDM_Laserpointer(off), MOT_StopController(MOT_NORMAL). Best effort: every call is made
 /// even if an earlier one fails; the failures are returned.
 pub fn safe_state(c: &mut Client) -> Vec<GeoComError> {
