@@ -40,6 +40,7 @@ fn args(link: GeoComLink, plan: &Path, room: Option<String>, agent: AgentKind) -
         tie_break: None,
         crc: false,
         timeout_ms: 2000,
+        move_timeout_ms: 2000,
         retries: 3,
         json: None,
         quiet: true,
@@ -225,6 +226,7 @@ fn recovered_faults_keep_the_answer_bit_identical() {
         let mut a = args(dummy(), &file, None, AgentKind::Heuristic1);
         a.crc = crc;
         a.timeout_ms = 300;
+        a.move_timeout_ms = 300;
         let (got, state) = through_sim(a, vec![spec(faults)]);
         let got = got.unwrap_or_else(|e| panic!("{faults}: {e}"));
         assert_eq!(got, want, "{faults}");
@@ -303,6 +305,7 @@ fn fatal_faults_end_with_the_instrument_still() {
     for (faults, rpc, what) in cases {
         let mut a = args(dummy(), &file, None, AgentKind::Heuristic1);
         a.timeout_ms = 200;
+        a.move_timeout_ms = 200;
         let (got, state) = through_sim(a, faults.iter().map(|f| spec(f)).collect());
         let msg = got.expect_err("session must fail").to_string();
         assert!(!msg.contains('\n'), "{msg}");

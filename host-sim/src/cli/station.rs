@@ -125,9 +125,12 @@ pub struct StationArgs {
     /// Add the CRC-16 header field to requests and require it on replies.
     #[arg(long)]
     pub crc: bool,
-    /// Reply time-out for quick RPCs (ms; positioning and measuring get 30 s).
+    /// Reply time-out for quick RPCs (ms).
     #[arg(long, default_value_t = 3000)]
     pub timeout_ms: u64,
+    /// Reply time-out around positioning and measuring (ms).
+    #[arg(long, default_value_t = 30000)]
+    pub move_timeout_ms: u64,
     /// Repeats after a time-out, garbled line, CRC mismatch or dropped link.
     #[arg(long, default_value_t = 3)]
     pub retries: u32,
@@ -339,6 +342,7 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
     let (name, setup, policies) = setup_of(a)?;
     let config = ClientConfig {
         timeout: Duration::from_millis(a.timeout_ms),
+        slow_timeout: Duration::from_millis(a.move_timeout_ms),
         retries: a.retries,
         crc: a.crc,
         ..Default::default()

@@ -17,8 +17,8 @@
 //! Every recovery is recorded as an [`Event`] (the live view prints them); when a request
 //! cannot be completed the error names the fault and the RPC ([`GeoComError`]).
 
+use crate::geocom::codes::rpc_numbers::rpc_name;
 use crate::geocom::codes::{CodeClass, ReturnCode};
-use crate::geocom::rpc::rpc_name;
 use crate::geocom::wire::{self, Param, Reply, MAX_LINE};
 use std::io::{self, Read, Write};
 use std::net::TcpStream;
@@ -142,6 +142,8 @@ pub struct ClientConfig {
     /// How long to wait for a reply line (positioning and measuring are slower: the
     /// session sets a longer time-out around them).
     pub timeout: Duration,
+    /// Reply time-out around AUT_MakePositioning and the EDM measurement.
+    pub slow_timeout: Duration,
     /// Repeats after a time-out, a garbled line, a CRC mismatch or a dropped link.
     pub retries: u32,
     /// Repeats while the instrument answers busy.
@@ -158,6 +160,7 @@ impl Default for ClientConfig {
     fn default() -> Self {
         ClientConfig {
             timeout: Duration::from_secs(5),
+            slow_timeout: Duration::from_secs(30),
             retries: 3,
             busy_retries: 10,
             busy_wait: Duration::from_millis(200),

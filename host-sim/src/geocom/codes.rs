@@ -383,6 +383,75 @@ impl std::fmt::Display for ReturnCode {
     }
 }
 
+/// The RPC numbers of the job and their manual names (here, below the client, so that its
+/// errors can name the RPC; [`crate::geocom::rpc`] re-exports them).
+pub mod rpc_numbers {
+    /// COM_NullProc: ping.
+    pub const COM_NULLPROC: u16 = 0;
+    /// COM_GetDoublePrecision: digits of reals in replies.
+    pub const COM_GET_DOUBLE_PRECISION: u16 = 108;
+    /// COM_GetSWVersion: GeoCOM release, version, subversion.
+    pub const COM_GET_SW_VERSION: u16 = 110;
+    /// CSV_GetInstrumentNo: serial number.
+    pub const CSV_GET_INSTRUMENT_NO: u16 = 5003;
+    /// CSV_GetInstrumentName: instrument name.
+    pub const CSV_GET_INSTRUMENT_NAME: u16 = 5004;
+    /// CSV_GetSWVersion: instrument firmware release, version, subversion.
+    pub const CSV_GET_SW_VERSION: u16 = 5034;
+    /// EDM_Laserpointer: the visible laser on/off.
+    pub const EDM_LASERPOINTER: u16 = 1004;
+    /// TMC_GetAngle5: Hz, V (simple angle measurement).
+    pub const TMC_GET_ANGLE5: u16 = 2107;
+    /// TMC_DoMeasure: start / stop / clear a distance measurement.
+    pub const TMC_DO_MEASURE: u16 = 2008;
+    /// TMC_GetSimpleMea: Hz, V and the slope distance of the last measurement.
+    pub const TMC_GET_SIMPLE_MEA: u16 = 2108;
+    /// TMC_GetStation: E0, N0, H0, Hi.
+    pub const TMC_GET_STATION: u16 = 2009;
+    /// TMC_SetStation: E0, N0, H0, Hi.
+    pub const TMC_SET_STATION: u16 = 2010;
+    /// TMC_SetEdmMode: EDM measurement mode.
+    pub const TMC_SET_EDM_MODE: u16 = 2020;
+    /// TMC_SetOrientation: make the current direction read a given Hz.
+    pub const TMC_SET_ORIENTATION: u16 = 2113;
+    /// MOT_StopController: stop the motor controller.
+    pub const MOT_STOP_CONTROLLER: u16 = 6002;
+    /// AUT_MakePositioning: turn the telescope to Hz, V.
+    pub const AUT_MAKE_POSITIONING: u16 = 9027;
+    /// BAP_SetTargetType: reflector or reflectorless.
+    pub const BAP_SET_TARGET_TYPE: u16 = 17021;
+    /// BAP_GetTargetType.
+    pub const BAP_GET_TARGET_TYPE: u16 = 17022;
+    /// BAP_MeasDistanceAngle: measure and return Hz, V, distance.
+    pub const BAP_MEAS_DISTANCE_ANGLE: u16 = 17017;
+
+    /// The manual's name of an RPC number.
+    pub fn rpc_name(rpc: u16) -> &'static str {
+        match rpc {
+            COM_NULLPROC => "COM_NullProc",
+            COM_GET_DOUBLE_PRECISION => "COM_GetDoublePrecision",
+            COM_GET_SW_VERSION => "COM_GetSWVersion",
+            CSV_GET_INSTRUMENT_NO => "CSV_GetInstrumentNo",
+            CSV_GET_INSTRUMENT_NAME => "CSV_GetInstrumentName",
+            CSV_GET_SW_VERSION => "CSV_GetSWVersion",
+            EDM_LASERPOINTER => "EDM_Laserpointer",
+            TMC_GET_ANGLE5 => "TMC_GetAngle5",
+            TMC_DO_MEASURE => "TMC_DoMeasure",
+            TMC_GET_SIMPLE_MEA => "TMC_GetSimpleMea",
+            TMC_GET_STATION => "TMC_GetStation",
+            TMC_SET_STATION => "TMC_SetStation",
+            TMC_SET_EDM_MODE => "TMC_SetEdmMode",
+            TMC_SET_ORIENTATION => "TMC_SetOrientation",
+            MOT_STOP_CONTROLLER => "MOT_StopController",
+            AUT_MAKE_POSITIONING => "AUT_MakePositioning",
+            BAP_SET_TARGET_TYPE => "BAP_SetTargetType",
+            BAP_GET_TARGET_TYPE => "BAP_GetTargetType",
+            BAP_MEAS_DISTANCE_ANGLE => "BAP_MeasDistanceAngle",
+            _ => "RPC",
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -27,7 +27,6 @@ use activesense_core::FloorPlan;
 use serde::Serialize;
 use std::convert::Infallible;
 use std::f64::consts::{FRAC_PI_2, TAU};
-use std::time::Duration;
 
 /// What the instrument says about itself.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -51,9 +50,6 @@ pub struct GeoComInstrument {
     /// The return code of the last measurement (a warning is kept for the live view).
     pub last_rc: ReturnCode,
 }
-
-/// Reply time-out while the motor turns or the EDM measures.
-const SLOW_TIMEOUT: Duration = Duration::from_secs(30);
 
 impl GeoComInstrument {
     /// Pings the instrument, reads who it is, sets reflectorless single measurements and
@@ -94,7 +90,7 @@ impl GeoComInstrument {
         let (hz0, _) = rpc::get_angle(client)?;
         let v = vertical.unwrap_or(FRAC_PI_2);
         let fast = client.config().timeout;
-        client.set_timeout(SLOW_TIMEOUT.max(fast));
+        client.set_timeout(client.config().slow_timeout.max(fast));
         rpc::make_positioning(client, hz0, v)?;
         client.set_timeout(fast);
         Ok((
@@ -128,7 +124,8 @@ impl GeoComInstrument {
         f: impl FnOnce(&mut Client) -> Result<T, GeoComError>,
     ) -> Result<T, GeoComError> {
         let fast = self.client.config().timeout;
-        self.client.set_timeout(SLOW_TIMEOUT.max(fast));
+        self.client
+            .set_timeout(self.client.config().slow_timeout.max(fast));
         let r = f(&mut self.client);
         self.client.set_timeout(fast);
         r
