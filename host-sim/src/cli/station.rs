@@ -354,7 +354,8 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
         a.vertical_deg.map(f64::to_radians),
     ) {
         Ok(x) => x,
-        Err((mut c, e)) => {
+        Err(failed) => {
+            let (mut c, e) = *failed;
             let still = rpc::safe_state(&mut c);
             bail!("{e}; {}", still_note(&still));
         }

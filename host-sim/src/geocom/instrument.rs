@@ -59,7 +59,7 @@ impl GeoComInstrument {
         mut client: Client,
         config: EpisodeConfig,
         vertical: Option<f64>,
-    ) -> Result<(Self, InstrumentInfo), (Client, GeoComError)> {
+    ) -> Result<(Self, InstrumentInfo), Box<(Client, GeoComError)>> {
         let r = Self::hello(&mut client, vertical);
         match r {
             Ok((info, v)) => Ok((
@@ -72,7 +72,7 @@ impl GeoComInstrument {
                 },
                 info,
             )),
-            Err(e) => Err((client, e)),
+            Err(e) => Err(Box::new((client, e))),
         }
     }
 
