@@ -15,6 +15,7 @@
 //! | [`calibrate`] | the fit of the calibrated stop |
 //! | [`inspect`] | the inspection tool: trajectory pages and ([`inspect::aggregate`]) the guided-back-propagation analysis |
 //! | [`link`] | the instrument serial protocol (`docs/protocol.md`): [`link::device`] the simulated instrument, the loopback device and the QEMU launcher; [`link::qemu_cmd`] the one QEMU command line (shared with xtask); [`link::error`] the link's errors; [`link::serial`] the protocol client and its transports; [`link::remote`] the `sim`, `serial` and `mcu-bench` commands |
+//! | [`geocom`] | a Leica total station over GeoCOM (`docs/GEOCOM.md`): [`geocom::wire`] framing, [`geocom::codes`] return codes, [`geocom::client`] transports and the retrying call, [`geocom::rpc`] the RPCs, [`geocom::instrument`] the core `Instrument` and the station session, [`geocom::sim`] the instrument simulator |
 //! | [`cli`] | the bodies of the `activesense` commands, one module each ([`cli::plan`], [`cli::episode`], [`cli::train`], [`cli::dataset`], [`cli::eval`], [`cli::bench_registration`], [`cli::bench_localization`], [`cli::policy`]); the binary (`src/main.rs`) is the clap tree only |
 
 pub mod baselines;
@@ -23,6 +24,7 @@ pub mod calibrate;
 pub mod cli;
 pub mod episode;
 pub mod eval;
+pub mod geocom;
 pub mod inspect;
 pub mod learn;
 pub mod link;

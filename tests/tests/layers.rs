@@ -44,6 +44,7 @@ const HOST_LAYERS: &[&str] = &[
     "calibrate",
     "inspect",
     "link",
+    "geocom",
     "cli",
 ];
 

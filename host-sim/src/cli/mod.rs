@@ -10,6 +10,7 @@ pub mod episode;
 pub mod eval;
 pub mod plan;
 pub mod policy;
+pub mod station;
 pub mod train;
 
 use crate::world::sensor::SensorModel;
