@@ -150,16 +150,10 @@ impl PolicyInput<'_> {
         self.fill_belief(out, q(0.0), q)
     }
 
-    /// The one belief extraction both writers share: `map(probability / peak)` per cell,
-    /// `blank` outside the grid.
-    fn fill_belief<T: Copy>(&self, out: &mut [T], blank: T, map: impl Fn(f32) -> T) -> usize {
+    /// The value of every belief level (`table[level]`) and of a cell outside the room,
+    /// each `map(probability / peak)`.
+    fn level_table<T: Copy>(&self, map: impl Fn(f32) -> T) -> ([T; 256], T) {
         let loc = self.localizer;
-        let n = self.belief_len();
-        if !loc.is_ready() || out.len() < n {
-            return 0;
-        }
-        let g = loc.grid();
-        let (nx, ny) = (g.nx as usize, g.ny as usize);
         // A cell's probability is a function of its level (0..=255) alone, and increases
         // with it: the peak is the top level's (the localizer keeps it), and each cell's value is one of 256, each
         // computed by exactly the arithmetic `prob(i) * scale` would do. On the Cortex-M4 this
@@ -174,6 +168,66 @@ impl PolicyInput<'_> {
                 *t = map(loc.prob_of_level(Some(m as u8)) * scale);
             }
         }
+        (table, outside)
+    }
+
+    /// The quantised belief map of [`PolicyInput::write_belief_q`] in the int8 network's
+    /// convolution layout (`crate::policy::int8::fast`): cell `(bin, y, x)` at
+    /// `out[((y + 1)·side + x + 1)·K + bin]`, the `K` planes of a pixel adjacent, one row and
+    /// column of padding before the map. Writes only the map's cells (the caller fills the
+    /// rest with the zero point, the quantised 0). Returns `belief_len()`, or 0 when the
+    /// localizer is not ready or `out` is shorter than `side² · K` or `side ≤ BELIEF_SIDE`.
+    pub fn write_belief_q_hwc(
+        &self,
+        out: &mut [i8],
+        scale: f32,
+        zero_point: i32,
+        side: usize,
+    ) -> usize {
+        let loc = self.localizer;
+        let k = self.belief_planes();
+        if !loc.is_ready() || side <= BELIEF_SIDE || out.len() < side * side * k {
+            return 0;
+        }
+        let p = crate::policy::int8::QuantParams { scale, zero_point };
+        let (table, outside) = self.level_table(|v| crate::policy::int8::quantize_value(v, p));
+        let g = loc.grid();
+        let (nx, ny) = (g.nx as usize, g.ny as usize);
+        // Cells come in grid order, [bin][y][x]: walk the output index along.
+        let (mut x, mut y, mut bin) = (0usize, 0usize, 0usize);
+        let mut o = (side + 1) * k;
+        loc.for_each_level(|_, lv| {
+            if x < BELIEF_SIDE && y < BELIEF_SIDE {
+                if let Some(v) = out.get_mut(o) {
+                    *v = lv.map_or(outside, |m| table[m as usize]);
+                }
+            }
+            o += k;
+            x += 1;
+            if x == nx {
+                x = 0;
+                y += 1;
+                if y == ny {
+                    y = 0;
+                    bin += 1;
+                }
+                o = ((y + 1) * side + 1) * k + bin;
+            }
+        });
+        self.belief_len()
+    }
+
+    /// The one belief extraction both writers share: `map(probability / peak)` per cell,
+    /// `blank` outside the grid.
+    fn fill_belief<T: Copy>(&self, out: &mut [T], blank: T, map: impl Fn(f32) -> T) -> usize {
+        let loc = self.localizer;
+        let n = self.belief_len();
+        if !loc.is_ready() || out.len() < n {
+            return 0;
+        }
+        let g = loc.grid();
+        let (nx, ny) = (g.nx as usize, g.ny as usize);
+        let (table, outside) = self.level_table(map);
         if nx == BELIEF_SIDE && ny == BELIEF_SIDE {
             // The grid is the map: flat cell index = output index.
             loc.for_each_level(|i, lv| {
