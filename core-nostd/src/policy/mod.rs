@@ -191,29 +191,7 @@ impl PolicyInput<'_> {
         }
         let p = crate::policy::int8::QuantParams { scale, zero_point };
         let (table, outside) = self.level_table(|v| crate::policy::int8::quantize_value(v, p));
-        let g = loc.grid();
-        let (nx, ny) = (g.nx as usize, g.ny as usize);
-        // Cells come in grid order, [bin][y][x]: walk the output index along.
-        let (mut x, mut y, mut bin) = (0usize, 0usize, 0usize);
-        let mut o = (side + 1) * k;
-        loc.for_each_level(|_, lv| {
-            if x < BELIEF_SIDE && y < BELIEF_SIDE {
-                if let Some(v) = out.get_mut(o) {
-                    *v = lv.map_or(outside, |m| table[m as usize]);
-                }
-            }
-            o += k;
-            x += 1;
-            if x == nx {
-                x = 0;
-                y += 1;
-                if y == ny {
-                    y = 0;
-                    bin += 1;
-                }
-                o = ((y + 1) * side + 1) * k + bin;
-            }
-        });
+        loc.write_levels_interleaved(out, side, BELIEF_SIDE, &table, outside);
         self.belief_len()
     }
 
@@ -350,6 +328,23 @@ mod tests {
                         (loc.prob(i) * scale).to_bits(),
                         "cell {i}"
                     );
+                }
+                // The int8 network's padded, channel-interleaved map holds the same
+                // quantised values as the planar one, the zero point around them.
+                let (scale_q, zp) = (1.0 / 255.0, -128);
+                let mut planar = [0i8; 10 * BELIEF_PLANE];
+                assert_eq!(input.write_belief_q(&mut planar, scale_q, zp), n);
+                let (side, kb) = (BELIEF_SIDE + 1, cfg.rot_bins as usize);
+                let mut hwc = [zp as i8; 31 * 31 * 10];
+                assert_eq!(input.write_belief_q_hwc(&mut hwc, scale_q, zp, side), n);
+                for (i, &v) in hwc[..side * side * kb].iter().enumerate() {
+                    let (y, x, b) = (i / kb / side, i / kb % side, i % kb);
+                    let want = if x == 0 || y == 0 {
+                        zp as i8
+                    } else {
+                        planar[b * BELIEF_PLANE + (y - 1) * BELIEF_SIDE + x - 1]
+                    };
+                    assert_eq!(v, want, "bin {b} y {y} x {x}");
                 }
                 let bearing = k as f32 * 0.9;
                 let hit = plan

@@ -105,26 +105,34 @@ impl Requant {
     /// [`multiply_by_quantized_multiplier`]`(acc + bias, …)`.
     #[inline(always)]
     pub(super) fn scale(&self, acc: i32) -> i32 {
-        let mut x = acc.saturating_add(self.bias);
-        if self.left != 0 {
-            x = x.saturating_mul(1 << self.left);
+        let x = acc.saturating_add(self.bias);
+        if self.left != 0 || self.mult < 0 {
+            return self.scale_general(x);
         }
-        // The doubling high product: (x·m + 2³⁰) >> 31; only x = m = i32::MIN saturates,
-        // which a non-negative multiplier (all a blob may hold) never meets.
-        let h = if self.mult >= 0 {
-            ((x as i64 * self.mult as i64 + (1 << 30)) >> 31) as i32
-        } else {
-            super::kernels::saturating_rounding_doubling_high_mul(x, self.mult)
-        };
-        // Rounding division by 2^right, half away from zero.
+        // The doubling high product: (x·m + 2³⁰) >> 31 (only x = m = i32::MIN would
+        // saturate, and m ≥ 0 here), then the rounding division by 2^right, half away
+        // from zero.
+        let h = ((x as i64 * self.mult as i64 + (1 << 30)) >> 31) as i32;
         let threshold = (self.mask >> 1) + i32::from(h < 0);
         (h >> self.right) + i32::from((h & self.mask) > threshold)
     }
 
-    /// [`requantize_i8`]`(acc + bias, …)`.
+    /// A left shift or a negative multiplier (neither in a calibrated blob).
+    #[cold]
+    #[inline(never)]
+    fn scale_general(&self, x: i32) -> i32 {
+        let x = x.saturating_mul(1 << self.left);
+        let h = super::kernels::saturating_rounding_doubling_high_mul(x, self.mult);
+        super::kernels::rounding_divide_by_pot(h, self.right as i32)
+    }
+
+    /// [`requantize_i8`]`(acc + bias, …)` (`lo ≤ 127`: a valid zero point).
     #[inline(always)]
-    pub(super) fn to_i8(&self, acc: i32) -> i8 {
-        self.scale(acc).saturating_add(self.zp).clamp(self.lo, 127) as i8
+    pub(super) fn apply_i8(&self, acc: i32) -> i8 {
+        self.scale(acc)
+            .saturating_add(self.zp)
+            .max(self.lo)
+            .min(127) as i8
     }
 }
 
@@ -212,15 +220,23 @@ pub(super) fn conv<D: Dot>(layer: &LayerView<'_>, x: &[i8], work: &mut ConvWork,
     if c_in == 0 || n_out == 0 || x.len() < side * side * c_in + (seg - 3 * c_in) {
         return;
     }
-    let (out, planar, o_side) = match out {
+    // Output `o` of pixel (oy, ox) goes to `pixel(oy, ox) + o · o_stride`.
+    let (out, o_stride, o_side) = match out {
         ConvOut::Padded(buf, s) => {
             if s < n_out + 2 || buf.len() < s * s * c_out {
                 return;
             }
             buf.fill(layer.output.zero_point as i8);
-            (buf, false, s)
+            (buf, 1, s)
         }
-        ConvOut::Planar(buf) => (buf, true, n_out),
+        ConvOut::Planar(buf) => (buf, n_out * n_out, 0),
+    };
+    let pixel = |oy: usize, ox: usize| {
+        if o_stride == 1 {
+            ((oy + 1) * o_side + ox + 1) * c_out
+        } else {
+            oy * n_out + ox
+        }
     };
     let row = side * c_in;
     let window = 2 * row + seg;
@@ -230,6 +246,8 @@ pub(super) fn conv<D: Dot>(layer: &LayerView<'_>, x: &[i8], work: &mut ConvWork,
             return;
         }
         let wide = &work.wide[..wlen];
+        let lanes = (c_out - 4 * g).min(4);
+        let ch = &work.ch[..lanes];
         for oy in 0..n_out {
             for ox in 0..n_out {
                 // The window's top-left tap: padded row 2·oy, column 2·ox.
@@ -238,19 +256,12 @@ pub(super) fn conv<D: Dot>(layer: &LayerView<'_>, x: &[i8], work: &mut ConvWork,
                 if let Some(win) = x.get(base..base + window) {
                     D::conv4(win, row, seg, wide, &mut acc);
                 }
-                for (r, (&a, q)) in acc.iter().zip(&work.ch).enumerate() {
-                    let o = 4 * g + r;
-                    if o >= c_out {
-                        break;
-                    }
-                    let i = if planar {
-                        (o * n_out + oy) * n_out + ox
-                    } else {
-                        ((oy + 1) * o_side + ox + 1) * c_out + o
-                    };
+                let mut i = pixel(oy, ox) + 4 * g * o_stride;
+                for (&a, q) in acc.iter().zip(ch) {
                     if let Some(v) = out.get_mut(i) {
-                        *v = q.to_i8(a);
+                        *v = q.apply_i8(a);
                     }
+                    i += o_stride;
                 }
             }
         }
@@ -292,7 +303,7 @@ pub(super) fn fully_connected_i8<D: Dot>(layer: &LayerView<'_>, input: &[i8], ou
     let (zp, relu) = (layer.output.zero_point, layer.dims.relu);
     fc::<D>(layer, input, |o, acc, mult, shift| {
         if let Some(v) = out.get_mut(o) {
-            *v = Requant::new((0, mult, shift), zp, relu).to_i8(acc);
+            *v = Requant::new((0, mult, shift), zp, relu).apply_i8(acc);
         }
     });
 }

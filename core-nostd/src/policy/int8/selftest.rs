@@ -342,13 +342,10 @@ fn layer_ticks(
     now: impl Fn() -> u32,
 ) -> [u32; N_LAYERS] {
     let l = &policy.layers;
-    let Activations {
-        a1,
-        a2,
-        cat,
-        joint,
-        work,
-    } = &mut scratch.acts;
+    let Activations { a2, cat, joint } = &mut scratch.acts;
+    let mut a1 = [0i8; fast::X2_LEN];
+    let mut work = ConvWork::new();
+    let work = &mut work;
     let mut t = [0u32; N_LAYERS];
     let s2 = fast::padded_side(S2);
     let h = l[L_BELIEF].dims.outputs;
