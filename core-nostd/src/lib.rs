@@ -58,7 +58,7 @@
 //! | [`protocol`] | host ⇄ instrument serial protocol (`docs/protocol.md`): [`protocol::messages`], [`protocol::framing`] |
 //! | [`device`] | the device: [`device::controller`], [`device::session`], [`device::instrument`] |
 #![no_std]
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod checksum;
