@@ -57,6 +57,13 @@ pub struct CoverageReport {
     pub heading_estimated: u32,
     /// … all estimated components within 2σ.
     pub within_2sigma_all: u32,
+    /// Answers with a precision whose truth is among the candidates (within 5 cm and 1°):
+    /// the σ describe these; a wrong answer is what the stated risk is for.
+    pub right_with_precision: u32,
+    /// … of those, every estimated component within 2σ.
+    pub right_within_2sigma_all: u32,
+    /// … of those, easting, northing and heading (when estimated) within 2σ.
+    pub right_within_2sigma: [u32; 3],
     /// Answers listing more than one candidate.
     pub ambiguous: u32,
     /// Answers where the truth is one of the candidates (position within 5 cm, heading
@@ -79,7 +86,7 @@ impl CoverageReport {
             }
         };
         format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {:.1} mm | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} mm | {} | {} |",
             self.rot_bins,
             self.episodes,
             pct(self.with_precision, self.episodes),
@@ -88,6 +95,16 @@ impl CoverageReport {
             pct(self.within_2sigma_n, self.with_precision),
             pct(self.within_2sigma_heading, self.heading_estimated),
             pct(self.within_2sigma_all, self.with_precision),
+            {
+                let n = self.right_with_precision;
+                let p = |k: u32| format!("{:.1}", 100.0 * k as f64 / n.max(1) as f64);
+                let w = self.right_within_2sigma;
+                if self.rot_bins == 1 {
+                    format!("{} / {} / – % of {n}", p(w[0]), p(w[1]))
+                } else {
+                    format!("{} / {} / {} % of {n}", p(w[0]), p(w[1]), p(w[2]))
+                }
+            },
             1000.0 * self.median_sigma_m,
             pct(self.ambiguous, self.episodes),
             pct(self.truth_among_candidates, self.episodes),
@@ -96,7 +113,7 @@ impl CoverageReport {
 
     /// The table header matching [`CoverageReport::row`].
     pub fn header() -> &'static str {
-        "| K | episodes | with σ | underdetermined | E within 2σ | N within 2σ | heading within 2σ | all within 2σ | median σ | ambiguous | truth among candidates |\n|---|---|---|---|---|---|---|---|---|---|---|"
+        "| K | episodes | with σ | underdetermined | E within 2σ | N within 2σ | heading within 2σ | all within 2σ | right answers: E / N / heading within 2σ | median σ | ambiguous | truth among candidates |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     }
 }
 
@@ -173,6 +190,13 @@ pub fn coverage(run: &CoverageRun) -> CoverageReport {
             ok
         };
         r.within_2sigma_all += (ok_e && ok_n && ok_h) as u32;
+        if (e[0] * e[0] + e[1] * e[1]).sqrt() * a.metres_per_unit < 0.05 && e[2].abs() < 1.0 {
+            r.right_with_precision += 1;
+            r.right_within_2sigma_all += (ok_e && ok_n && ok_h) as u32;
+            r.right_within_2sigma[0] += ok_e as u32;
+            r.right_within_2sigma[1] += ok_n as u32;
+            r.right_within_2sigma[2] += (ok_h && !a.heading_given) as u32;
+        }
     }
     sigmas.sort_by(f64::total_cmp);
     r.median_sigma_m = sigmas.get(sigmas.len() / 2).copied().unwrap_or(0.0);

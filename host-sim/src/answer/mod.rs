@@ -38,7 +38,7 @@ use std::f64::consts::PI;
 /// The range noise the precision assumes, in units of the sensor's σ: the fit adds its own
 /// imprecision to the EDM's (ICP convergence, f32), measured by `answer-coverage` on
 /// *training* plans (the README's coverage figure is on test plans).
-pub const PRECISION_SIGMA_FACTOR: f32 = 1.0;
+pub const PRECISION_SIGMA_FACTOR: f32 = 1.15;
 
 /// A reading counts toward the precision when its range residual at the answer is within
 /// this (m): the refinement's "explained" test (3 × its 3 cm σ).
