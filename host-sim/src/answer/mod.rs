@@ -28,9 +28,11 @@ mod text;
 
 use crate::episode::Trajectory;
 use crate::world::planfile::PlanFrame;
-use activesense_core::episode::{Action, EpisodeConfig, EpisodeState, Observation};
+use activesense_core::episode::{Action, EpisodeConfig, EpisodeParams, EpisodeState, Observation};
+use activesense_core::protocol::EpisodeReport;
 use activesense_core::registration::precision::{pose_covariance, PoseCovariance};
 use activesense_core::registration::{Measurement, Observations};
+use activesense_core::world::symmetry::{symmetry_order, SymmetryTolerance};
 use activesense_core::{FloorPlan, Pose2};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -516,6 +518,39 @@ impl Answer {
             truth: Some(t.truth),
             hint,
             range_sigma: t.spec.sensor.sigma,
+        })
+    }
+}
+
+impl Answer {
+    /// The answer a device reported (`sim`, `serial run`, the station): its report, the
+    /// exchanged steps (for the readings), the episode's parameters (known heading, truth
+    /// in simulation) and the plan it was loaded with.
+    #[allow(clippy::too_many_arguments)]
+    pub fn of_report(
+        label: String,
+        plan: &FloorPlan,
+        frame: &PlanFrame,
+        params: &EpisodeParams,
+        report: &EpisodeReport,
+        steps: &[(Action, Observation)],
+        range_sigma: f32,
+        hint: Option<HeadingHint>,
+    ) -> Answer {
+        let readings = readings_of_steps(params.config, steps, report.answer_readings);
+        Answer::new(&AnswerInput {
+            label,
+            plan,
+            frame,
+            pose: report.refined.or(report.coarse),
+            refined: report.refined.is_some(),
+            readings: &readings,
+            heading_known: params.known_heading.is_some(),
+            symmetry_order: symmetry_order(plan, &SymmetryTolerance::default()),
+            stop_risk: report.stop_risk,
+            truth: params.ground_truth,
+            hint,
+            range_sigma,
         })
     }
 }

@@ -66,6 +66,10 @@ pub struct RemoteEpisodeArgs {
     /// Replay every episode in-process and require bit-identical results.
     #[arg(long)]
     pub verify: bool,
+    /// An approximate heading, DEG±TOL (degrees counter-clockwise from the plan's +x axis):
+    /// breaks the tie between the poses a symmetric room leaves (see `episode --help`).
+    #[arg(long, value_parser = crate::answer::parse_heading_hint, allow_hyphen_values = true)]
+    pub heading_hint: Option<crate::answer::HeadingHint>,
 }
 
 /// `activesense sim`.
@@ -301,6 +305,31 @@ fn print_run(
     t.cost += r.cost as f64;
 }
 
+/// The episode's answer ([`crate::answer::Answer`]) in the plan's coordinates, indented
+/// under its report line.
+fn print_answer(
+    label: &str,
+    run: &EpisodeRun,
+    plan: &FloorPlan,
+    frame: &crate::world::planfile::PlanFrame,
+    params: &EpisodeParams,
+    a: &RemoteEpisodeArgs,
+) {
+    let answer = crate::answer::Answer::of_report(
+        label.to_string(),
+        plan,
+        frame,
+        params,
+        &run.report,
+        &run.steps,
+        SensorModel::default().sigma,
+        a.heading_hint,
+    );
+    for line in answer.to_text().lines() {
+        println!("  {line}");
+    }
+}
+
 fn print_totals(t: &Totals, secs: f64) {
     let n = t.episodes.max(1) as f64;
     println!(
@@ -394,6 +423,15 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
         let run = run_one(&mut link, &plan, &params, inst, reference)
             .with_context(|| format!("episode on {label}"))?;
         print_run(label, &run, &plan, &params, &mut t);
+        let frame = spec.user_plan.as_ref().map(|p| p.frame.clone());
+        print_answer(
+            label,
+            &run,
+            &plan,
+            &frame.unwrap_or_default(),
+            &params,
+            &a.episode,
+        );
     }
     let status = link.client.status().context("status")?;
     println!(
@@ -449,7 +487,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             for w in &loaded.warnings {
                 eprintln!("warning: {}: {w}", loaded.plan.name);
             }
-            let plan = loaded.plan.plan;
+            let plan = loaded.plan.plan.clone();
             let spec = LinkSpec::Serial {
                 path: r.port.clone(),
                 baud: r.baud,
@@ -480,6 +518,14 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                 let run = run_one(&mut link, &p, &params, inst, reference)
                     .with_context(|| format!("episode {i} on {}", r.port))?;
                 print_run(&format!("episode {i}"), &run, &p, &params, &mut t);
+                print_answer(
+                    &format!("episode {i}"),
+                    &run,
+                    &p,
+                    &loaded.plan.frame,
+                    &params,
+                    &r.episode,
+                );
             }
             print_totals(&t, start.elapsed().as_secs_f64());
             // A real instrument keeps running: no Shutdown, just leave the session.
@@ -618,6 +664,7 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
             min_observability: 0.0,
             timeout_ms: a.timeout_ms,
             verify: false,
+            heading_hint: None,
         };
         let mut row = McuBenchRow {
             rot_bins,
