@@ -427,12 +427,18 @@ fn page_steps_through_an_episode_in_headless_chromium() {
     assert_eq!(b.attr("data-step"), n.to_string());
     let legend = b.eval("document.getElementById('room-legend').textContent");
     assert!(
-        legend.as_str().unwrap().contains("final answer (refined, error 0."),
+        legend
+            .as_str()
+            .unwrap()
+            .contains("final answer (refined, error 0."),
         "{legend}"
     );
     b.key("Home", 36);
     let legend = b.eval("document.getElementById('room-legend').textContent");
-    assert!(!legend.as_str().unwrap().contains("final answer"), "{legend}");
+    assert!(
+        !legend.as_str().unwrap().contains("final answer"),
+        "{legend}"
+    );
 
     let page_png = base64_decode(&b.screenshot(None));
     assert_eq!(&page_png[1..4], b"PNG");

@@ -323,8 +323,9 @@ impl Answer {
                 };
                 a.precision = if c.exactly_determined() {
                     format!(
-                        "from {} readings for {unknowns} unknowns: exactly determined, no spare reading checked the fit (the σ are the sensor model's alone)",
-                        c.used
+                        "from {} of {} readings for {unknowns} unknowns: exactly determined, no spare reading checked the fit (the σ are the sensor model's alone)",
+                        c.used,
+                        i.readings.len()
                     )
                 } else {
                     format!(
@@ -339,6 +340,13 @@ impl Answer {
                         }
                     )
                 };
+                if 2 * (c.used as usize) < i.readings.len() {
+                    a.precision.push_str(&format!(
+                        "; WARNING: only {} of {} readings fit this pose, it is likely wrong",
+                        c.used,
+                        i.readings.len()
+                    ));
+                }
                 Some(c)
             }
             Some(Err(e)) => {

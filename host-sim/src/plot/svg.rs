@@ -154,7 +154,10 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
             r#"<line x1="{x:.1}" y1="{y:.1}" x2="{tx:.1}" y2="{ty:.1}" stroke="{colour}" stroke-width="3"/><circle cx="{x:.1}" cy="{y:.1}" r="6" fill="{colour}"/>"#
         );
     }
-    let px: Vec<(f32, f32)> = marks.iter().map(|(p, _, _)| f.px(p.translation())).collect();
+    let px: Vec<(f32, f32)> = marks
+        .iter()
+        .map(|(p, _, _)| f.px(p.translation()))
+        .collect();
     for (k, (_, colour, label)) in marks.iter().enumerate() {
         let dir = if marks.len() == 2 {
             let (o, q) = (px[k], px[1 - k]);
