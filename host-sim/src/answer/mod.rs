@@ -581,3 +581,136 @@ pub fn readings_of_steps(
     out.truncate(answer_readings as usize);
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use activesense_core::world::geometry::{rotate, unit, v2};
+
+    fn rect() -> FloorPlan {
+        let v: Vec<_> = [(-6.0, -4.0), (6.0, -4.0), (6.0, 4.0), (-6.0, 4.0)]
+            .iter()
+            .map(|&(x, y)| v2(x, y))
+            .collect();
+        FloorPlan::new(&v).unwrap()
+    }
+
+    /// Exact readings from `pose` at `bearings` (scene frame).
+    fn readings(plan: &FloorPlan, pose: &Pose2, bearings: &[f32]) -> Vec<Measurement> {
+        bearings
+            .iter()
+            .map(|&b| {
+                let hit = plan
+                    .ray_cast(pose.translation(), rotate(unit(b), pose.theta))
+                    .unwrap();
+                Measurement::new(b, hit.range)
+            })
+            .collect()
+    }
+
+    fn input<'a>(
+        plan: &'a FloorPlan,
+        frame: &'a PlanFrame,
+        pose: Pose2,
+        r: &'a [Measurement],
+        heading_known: bool,
+    ) -> AnswerInput<'a> {
+        AnswerInput {
+            label: "rect".into(),
+            plan,
+            frame,
+            pose: Some(pose),
+            refined: true,
+            readings: r,
+            heading_known,
+            symmetry_order: 2,
+            stop_risk: Some(0.004),
+            truth: Some(pose),
+            hint: None,
+            range_sigma: 0.01,
+        }
+    }
+
+    #[test]
+    fn hints_parse_and_refuse() {
+        assert_eq!(
+            parse_heading_hint("160±20"),
+            Ok(HeadingHint {
+                deg: 160.0,
+                tol: 20.0
+            })
+        );
+        assert_eq!(parse_heading_hint("-12.5+-5").unwrap().deg, -12.5);
+        assert_eq!(parse_heading_hint("90/10").unwrap().tol, 10.0);
+        for bad in ["160", "north±5", "10±-1", "10±200", "NaN±5"] {
+            assert!(parse_heading_hint(bad).is_err(), "{bad}");
+        }
+        assert_eq!(gon(90.0), 100.0);
+        assert_eq!(gon(-90.0), 300.0);
+        assert!((deg(3.0 * PI) - 180.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_symmetric_room_lists_both_twins_in_plan_coordinates() {
+        let plan = rect();
+        // The plan file was in millimetres around (2 600 123 000, 1 200 456 000).
+        let frame = PlanFrame {
+            unit: "mm".into(),
+            scale: 0.001,
+            bbox_centre: [2.600_123e9, 1.200_456e9],
+            centroid: [0.0, 0.0],
+        };
+        let pose = Pose2::new(2.0, -1.0, 0.5);
+        let r = readings(&plan, &pose, &[0.0, 1.3, 2.6, 3.9, 5.2]);
+        let a = Answer::new(&input(&plan, &frame, pose, &r, false));
+        assert!(a.ambiguous && a.candidates.len() == 2);
+        // By hand: (2, −1) m from the centre, and its twin turned by 180°.
+        assert!((a.candidates[0].easting - (2.600_123e9 + 2000.0)).abs() < 1e-3);
+        assert!((a.candidates[1].northing - (1.200_456e9 + 1000.0)).abs() < 1e-3);
+        assert!((a.candidates[1].heading_deg - deg(0.5 + PI)).abs() < 1e-4);
+        assert!(
+            a.sigma_e.unwrap() > 1.0 && a.sigma_e.unwrap() < 100.0,
+            "{a:?}"
+        );
+        assert_eq!(a.truth.as_ref().unwrap().nearest, 0);
+        assert!(a.to_text().contains("AMBIGUOUS: 2 poses"));
+        // A hint near the twin's heading keeps the twin only.
+        let hint = HeadingHint {
+            deg: deg(0.5 + PI) + 5.0,
+            tol: 20.0,
+        };
+        let a = Answer::new(&AnswerInput {
+            hint: Some(hint),
+            ..input(&plan, &frame, pose, &r, false)
+        });
+        assert!(!a.ambiguous && a.candidates.len() == 1);
+        assert!((a.easting.unwrap() - (2.600_123e9 - 2000.0)).abs() < 1e-3);
+        assert_eq!(a.candidates[0].probability, 1.0);
+        // With the heading given, the twin is not a candidate.
+        let a = Answer::new(&input(&plan, &frame, pose, &r, true));
+        assert!(!a.ambiguous && a.heading_given);
+        assert_eq!(a.sigma_heading_deg, Some(0.0));
+    }
+
+    #[test]
+    fn an_underdetermined_fit_prints_no_precision() {
+        let plan = rect();
+        let frame = PlanFrame::default();
+        let pose = Pose2::new(2.0, -1.0, 0.5);
+        let r = readings(&plan, &pose, &[0.0, 1.3]);
+        let a = Answer::new(&input(&plan, &frame, pose, &r, false));
+        assert_eq!(a.determination, Determination::Underdetermined);
+        assert_eq!(
+            (a.sigma_e, a.sigma_n, a.sigma_heading_deg),
+            (None, None, None)
+        );
+        let text = a.to_text();
+        assert!(text.contains("precision: UNDERDETERMINED"), "{text}");
+        let line = text.lines().find(|l| l.contains("precision")).unwrap();
+        assert!(!line.contains('±'), "{line}");
+        // Two readings with the heading given: exactly determined, said so.
+        let a = Answer::new(&input(&plan, &frame, pose, &r, true));
+        assert_eq!(a.determination, Determination::Exact);
+        assert!(a.to_text().contains("exactly determined"));
+    }
+}
