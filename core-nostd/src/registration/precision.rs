@@ -151,7 +151,7 @@ pub fn pose_covariance(
     if fixed_heading {
         let (p, q, r) = (info[0][0], info[0][1], info[1][1]);
         let det = p * r - q * q;
-        if !(det > SINGULAR_RATIO * p * r) {
+        if det.is_nan() || det <= SINGULAR_RATIO * p * r {
             return Err(PrecisionError::Singular { readings: used });
         }
         cov[0][0] = (s2 * r / det) as f32;
@@ -164,7 +164,7 @@ pub fn pose_covariance(
         let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
         let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
         let det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
-        if !(det > SINGULAR_RATIO * m[0][0] * m[1][1] * m[2][2]) {
+        if det.is_nan() || det <= SINGULAR_RATIO * m[0][0] * m[1][1] * m[2][2] {
             return Err(PrecisionError::Singular { readings: used });
         }
         let adj = [

@@ -39,8 +39,21 @@ pub struct AnswerCoverageArgs {
     termination: Termination,
     /// Give every episode a heading hint of its true heading plus OFFSET, ± TOL degrees
     /// ("OFFSET,TOL", e.g. "5,20"), to measure the tie-break.
-    #[arg(long, value_delimiter = ',', num_args = 2, allow_hyphen_values = true)]
-    hint_offset_tol: Option<Vec<f64>>,
+    #[arg(long, value_parser = parse_offset_tol, allow_hyphen_values = true)]
+    hint_offset_tol: Option<(f64, f64)>,
+}
+
+/// Parses `OFFSET,TOL` (degrees).
+fn parse_offset_tol(s: &str) -> Result<(f64, f64), String> {
+    let bad = || format!("'{s}' is not OFFSET,TOL (two numbers of degrees, e.g. 10,30)");
+    let (o, t) = s.split_once(',').ok_or_else(bad)?;
+    let o: f64 = o.trim().parse().map_err(|_| bad())?;
+    let t: f64 = t.trim().parse().map_err(|_| bad())?;
+    if o.is_finite() && t.is_finite() && t >= 0.0 {
+        Ok((o, t))
+    } else {
+        Err(bad())
+    }
 }
 
 /// Runs and prints the table.
@@ -79,7 +92,7 @@ pub fn run(a: AnswerCoverageArgs) -> Result<()> {
             rot_bins: k,
             agent: a.agent,
             termination: a.termination,
-            hint: a.hint_offset_tol.as_ref().map(|v| (v[0], v[1])),
+            hint: a.hint_offset_tol,
         });
         println!("{}", r.row());
     }
