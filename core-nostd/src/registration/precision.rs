@@ -126,7 +126,7 @@ pub fn pose_covariance(
             continue;
         }
         let n = plan.outward_normal(hit.wall);
-        let c = (n.x * d.x + n.y * d.y).abs().max(MIN_COS_INCIDENCE) as f64;
+        let c = abs(n.x * d.x + n.y * d.y).max(MIN_COS_INCIDENCE) as f64;
         let perp = n.x * -d.y + n.y * d.x;
         let j = [
             -(n.x as f64) / c,
@@ -202,6 +202,7 @@ pub fn pose_covariance(
 mod tests {
     use super::*;
     use crate::world::floorplan::MAX_VERTICES;
+    use core::f32::consts::{FRAC_PI_2, PI};
 
     fn rect(w: f32, h: f32) -> FloorPlan {
         let v: HVec<Vec2, MAX_VERTICES> = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)]
@@ -228,14 +229,14 @@ mod tests {
         // head-on: each fixes one coordinate to the range noise.
         let plan = rect(12.0, 8.0);
         let pose = Pose2::new(1.0, -1.0, 0.0);
-        let o = obs_at(&plan, &pose, &[0.0, core::f32::consts::FRAC_PI_2]);
+        let o = obs_at(&plan, &pose, &[0.0, FRAC_PI_2]);
         let c = pose_covariance(&plan, &o, &pose, true, 0.01, 0.1).unwrap();
         assert!((c.sigma_x() - 0.01).abs() < 1e-5, "{c:?}");
         assert!((c.sigma_y() - 0.01).abs() < 1e-5, "{c:?}");
         assert_eq!(c.sigma_heading(), 0.0);
         assert!(c.exactly_determined());
         // Four readings, two per axis: σ / √2.
-        let o = obs_at(&plan, &pose, &[0.0, 1.5708, 3.14159, -1.5708]);
+        let o = obs_at(&plan, &pose, &[0.0, FRAC_PI_2, PI, -FRAC_PI_2]);
         let c = pose_covariance(&plan, &o, &pose, true, 0.01, 0.1).unwrap();
         assert!((c.sigma_x() - 0.01 / 2f32.sqrt()).abs() < 1e-4, "{c:?}");
         assert!(!c.exactly_determined());
@@ -261,8 +262,8 @@ mod tests {
             Err(PrecisionError::Singular { .. })
         ));
         // An outlier is left out, not used.
-        let mut o = obs_at(&plan, &pose, &[0.0, 1.5708, 3.0]);
-        o.push(Measurement::new(-1.5708, 0.5)).unwrap();
+        let mut o = obs_at(&plan, &pose, &[0.0, FRAC_PI_2, 3.0]);
+        o.push(Measurement::new(-FRAC_PI_2, 0.5)).unwrap();
         let c = pose_covariance(&plan, &o, &pose, true, 0.01, 0.1).unwrap();
         assert_eq!((c.used, c.left_out), (3, 1));
         // NaN never panics.
