@@ -174,7 +174,10 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
                 (dx / n, dy / n)
             }
         } else {
-            (0.7071, -0.7071)
+            (
+                std::f32::consts::FRAC_1_SQRT_2,
+                -std::f32::consts::FRAC_1_SQRT_2,
+            )
         };
         let (x, y, anchor) = label_at(px[k], dir);
         let _ = writeln!(
