@@ -62,6 +62,10 @@ enum Command {
     /// learnt-agent trajectory (episode --agent learnt --json FILE) with a guided
     /// back-propagation overlay, or (--aggregate) the Fig.-4 analysis over many episodes.
     Inspect(activesense_sim::inspect::InspectArgs),
+    /// How honest the answer's printed precision is (how often the truth lies within 2σ)
+    /// and how often answers are ambiguous, over simulated episodes on generated plans or
+    /// your rooms (--plans-from).
+    AnswerCoverage(cli::answer_coverage::AnswerCoverageArgs),
     /// Fit the calibrated stop (--termination confident, --stop-risk): run episodes on
     /// calibration plans, fit P(wrong registration) from the belief and the readings, and
     /// write the models the core compiles (core-nostd/src/stop/calibration.rs) with a
@@ -112,6 +116,7 @@ fn main() -> ExitCode {
         Command::Train(a) => cli::train::run(a),
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Eval(a) => cli::eval::run(a),
+        Command::AnswerCoverage(a) => cli::answer_coverage::run(a),
         Command::Calibrate(a) => activesense_sim::calibrate::cmd_calibrate(a),
         Command::BenchRegistration(a) => cli::bench_registration::run(a),
         Command::BenchLocalization(a) => cli::bench_localization::run(a),

@@ -36,6 +36,7 @@ const CORE_LAYERS: &[&[&str]] = &[
 const HOST_LAYERS: &[&str] = &[
     "world",
     "episode",
+    "answer",
     "baselines",
     "plot",
     "learn",

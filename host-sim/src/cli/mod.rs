@@ -3,6 +3,7 @@
 //! model) and the small helpers they all use (writing a file, the command line as typed)
 //! live in this module.
 
+pub mod answer_coverage;
 pub mod bench_localization;
 pub mod bench_registration;
 pub mod dataset;
