@@ -44,6 +44,7 @@ fn args(link: GeoComLink, plan: &Path, room: Option<String>, agent: AgentKind) -
         retries: 3,
         json: None,
         quiet: true,
+        heading_hint: None,
     }
 }
 
@@ -332,8 +333,19 @@ fn set_station_writes_the_pose_and_orientation() {
     let got = got.unwrap();
     assert_eq!(got.symmetry_order, 1);
     let [x, y, _] = got.pose.unwrap();
-    assert_eq!(state.station[0], x as f64);
-    assert_eq!(state.station[1], y as f64);
+    // Written in the plan's own coordinates (metres), not the centred model frame.
+    let frame = activesense_sim::world::planfile::load_plan(&file, &Default::default())
+        .unwrap()
+        .plan
+        .frame;
+    let [e, n] = frame.to_plan([x as f64, y as f64]);
+    assert_eq!(state.station[0], e * frame.scale);
+    assert_eq!(state.station[1], n * frame.scale);
+    assert_ne!(
+        frame.bbox_centre,
+        [0.0, 0.0],
+        "the fixture must be off-centre for this test to tell the frames apart"
+    );
     // Against the simulator's truth: position within 5 cm, orientation within 0.5°.
     let [tx, ty, th] = state.truth;
     assert!(

@@ -14,7 +14,9 @@ use crate::geocom::instrument::{
 use crate::geocom::rpc;
 use crate::geocom::sim::{FaultSpec, GeoComSim, SimConfig};
 use crate::learn::agent::Policies;
-use crate::world::planfile::{self, PlanReadArgs};
+use crate::answer::{Answer, AnswerInput, HeadingHint};
+use crate::world::planfile::{self, PlanFrame, PlanReadArgs};
+use activesense_core::registration::Measurement;
 use activesense_core::episode::{Action, AgentKind, EpisodeConfig};
 use activesense_core::episode::{DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_core::pipeline::Stop;
@@ -140,11 +142,15 @@ pub struct StationArgs {
     /// Do not print every reading.
     #[arg(long)]
     pub quiet: bool,
+    /// An approximate heading, DEG±TOL (degrees counter-clockwise from the plan's +x axis, the
+    /// direction of encoder bearing 0): narrows a symmetric room's candidates in the answer.
+    #[arg(long, value_parser = crate::answer::parse_heading_hint, allow_hyphen_values = true)]
+    pub heading_hint: Option<HeadingHint>,
 }
 
-/// The station answer, in the model frame (the plan centred by the loader). The one place
-/// that prints and writes it.
-// lead: wire Answer here (plan coordinates, sigmas, candidates from the answer type).
+/// The station session's outcome in the model frame (the plan centred by the loader): what
+/// the bit-identity tests compare. What the surveyor reads is the [`Answer`] built from it
+/// ([`StationReport::answer`]): plan coordinates, precision, candidates.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct StationReport {
     /// The room.
@@ -210,22 +216,9 @@ impl StationReport {
             .collect()
     }
 
-    /// Prints the answer.
+    /// Prints the session's counts (the pose itself is printed by the [`Answer`], in the
+    /// plan's coordinates).
     pub fn print(&self) {
-        match self.pose {
-            None => println!("answer: none (too few readings to register)"),
-            Some(_) => {
-                for (k, c) in self.candidates().iter().enumerate() {
-                    println!(
-                        "answer{}: station x {:.4} m, y {:.4} m (model frame), bearing 0 points at {:.4}° (model, ccw from +x)",
-                        if self.symmetry_order > 1 { format!(" candidate {k}") } else { String::new() },
-                        c[0],
-                        c[1],
-                        c[2].to_degrees()
-                    );
-                }
-            }
-        }
         println!(
             "{} readings ({} in the answer), {} actions, risk {}, {}",
             self.readings.len(),
@@ -246,13 +239,15 @@ impl StationReport {
         }
     }
 
-    /// Writes the station to the instrument: E = x + shift, N = y + shift (keeping its
-    /// heights), orientation = the azimuth (clockwise from +y) of the telescope's current
-    /// direction. Refuses an ambiguous or unconfident answer.
+    /// Writes the station to the instrument: E, N = the candidate in the plan's own
+    /// coordinates ([`PlanFrame::to_plan`], f64), in metres (the instrument's unit: a
+    /// millimetre plan's coordinates are divided by 1000), keeping its heights;
+    /// orientation = the azimuth (clockwise from +y) of the telescope's current direction.
+    /// Refuses an ambiguous or unconfident answer.
     pub fn write_to_instrument(
         &self,
         client: &mut Client,
-        plan_shift: (f64, f64),
+        frame: &PlanFrame,
         tie_break: Option<u8>,
         max_risk: f32,
     ) -> Result<[f64; 4]> {
@@ -282,7 +277,8 @@ impl StationReport {
         };
         rpc::do_measure(client, rpc::tmc_prog::CLEAR).map_err(e)?;
         let old = rpc::get_station(client).map_err(e)?;
-        let station = [x + plan_shift.0, y + plan_shift.1, old[2], old[3]];
+        let [e_plan, n_plan] = frame.to_plan([x, y]);
+        let station = [e_plan * frame.scale, n_plan * frame.scale, old[2], old[3]];
         rpc::set_station(client, station).map_err(e)?;
         rpc::set_orientation(client, az).map_err(e)?;
         println!(
@@ -290,6 +286,40 @@ impl StationReport {
             station[0], station[1], az
         );
         Ok(station)
+    }
+}
+
+impl StationReport {
+    /// The surveyor's answer: the plan's own coordinates (`frame`), precision, candidates
+    /// (a symmetric room's twins), the stated risk.
+    pub fn answer(
+        &self,
+        setup: &SessionSetup,
+        frame: &PlanFrame,
+        o: &SessionOutcome,
+        hint: Option<HeadingHint>,
+    ) -> Answer {
+        let readings: Vec<Measurement> = o
+            .steps
+            .iter()
+            .filter(|s| s.action == Action::Measure && !s.no_return)
+            .filter_map(|s| s.range.map(|r| Measurement::new(s.bearing, r)))
+            .take(o.result.answer_readings as usize)
+            .collect();
+        Answer::new(&AnswerInput {
+            label: self.plan.clone(),
+            plan: &setup.plan,
+            frame,
+            pose: o.result.refined.map(|r| r.pose).or(o.result.coarse),
+            refined: o.result.refined.is_some(),
+            readings: &readings,
+            heading_known: false,
+            symmetry_order: o.result.symmetry_order,
+            stop_risk: o.result.stop_risk,
+            truth: None,
+            hint,
+            range_sigma: setup.sensor.sigma,
+        })
     }
 }
 
@@ -340,6 +370,7 @@ pub fn setup_of(a: &StationArgs) -> Result<(String, SessionSetup, Policies)> {
 /// Runs `activesense station`; returns the report (the tests call this).
 pub fn station(a: &StationArgs) -> Result<StationReport> {
     let (name, setup, policies) = setup_of(a)?;
+    let frame = planfile::load_plan(&a.plan, &a.read.options())?.plan.frame;
     let config = ClientConfig {
         timeout: Duration::from_millis(a.timeout_ms),
         slow_timeout: Duration::from_millis(a.move_timeout_ms),
@@ -390,10 +421,11 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
         }
     };
     let report = StationReport::new(&name, Some(info), &outcome);
+    let answer = report.answer(&setup, &frame, &outcome, a.heading_hint);
+    println!("{}", answer.to_text());
     report.print();
     let written = if a.set_station {
-        // lead: wire Answer here (plan_shift = the plan loader's centring shift).
-        Some(report.write_to_instrument(inst.client(), (0.0, 0.0), a.tie_break, a.stop_risk))
+        Some(report.write_to_instrument(inst.client(), &frame, a.tie_break, a.stop_risk))
     } else {
         None
     };
@@ -404,7 +436,11 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
     if let Some(p) = &a.json {
         super::write_file(
             p,
-            &serde_json::to_string_pretty(&(&report, &outcome.steps))?,
+            &serde_json::to_string_pretty(&serde_json::json!({
+                "answer": &answer,
+                "session": &report,
+                "steps": &outcome.steps,
+            }))?,
         )?;
     }
     if let Some(Err(e)) = written {
