@@ -377,3 +377,77 @@ fn an_ambiguous_answer_is_not_written_without_a_tie_break() {
     assert_eq!(state.station, [0.0; 4]);
     assert!(!state.log.contains(&2010) && !state.log.contains(&2113));
 }
+
+/// Issue 24: a millimetre DXF in national-grid coordinates (E ≈ 2.6e6 m) gives the same
+/// answer, relative to the room, as the same room centred in metres — to < 1 mm — and the
+/// station written to the instrument is the national-grid one, in metres.
+#[test]
+fn national_grid_dxf_gives_the_centred_rooms_answer() {
+    let dir = tmpdir("grid");
+    let room: [[f64; 2]; 6] = [
+        [0.0, 0.0],
+        [6.0, 0.0],
+        [6.0, 3.0],
+        [2.5, 3.0],
+        [2.5, 5.0],
+        [0.0, 5.0],
+    ];
+    let (e0, n0) = (2_600_123.0, 1_200_456.0);
+    // The same file name in two folders: the name seeds where the instrument stands.
+    let write_dxf = |sub: &str, insunits: u8, pts: Vec<[f64; 2]>| {
+        let mut dxf = format!(
+            "0\nSECTION\n2\nHEADER\n9\n$INSUNITS\n70\n{insunits}\n0\nENDSEC\n0\nSECTION\n2\nENTITIES\n0\nLWPOLYLINE\n5\n20\n8\nWALLS\n100\nAcDbPolyline\n90\n6\n70\n1\n"
+        );
+        for p in pts {
+            dxf += &format!("10\n{}\n20\n{}\n", p[0], p[1]);
+        }
+        dxf += "0\nENDSEC\n0\nEOF\n";
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+        let path = dir.join(sub).join("room.dxf");
+        std::fs::write(&path, dxf).unwrap();
+        path
+    };
+    // Millimetres on the national grid ($INSUNITS 4), and metres centred on the bounding
+    // box ($INSUNITS 6).
+    let dxf_path = write_dxf(
+        "grid",
+        4,
+        room.iter()
+            .map(|p| [(p[0] + e0) * 1000.0, (p[1] + n0) * 1000.0])
+            .collect(),
+    );
+    let centred_path = write_dxf(
+        "centred",
+        6,
+        room.iter().map(|p| [p[0] - 3.0, p[1] - 2.5]).collect(),
+    );
+    let answer_of = |plan: &Path, tag: &str| {
+        let mut a = args(dummy(), plan, None, AgentKind::Heuristic1);
+        a.set_station = true;
+        a.max_actions = 300;
+        a.stop_risk = 0.1;
+        let out = dir.join(format!("{tag}.json"));
+        a.json = Some(out.clone());
+        let (got, state) = through_sim(a, vec![]);
+        got.unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
+        (v["answer"].clone(), state.station)
+    };
+    let (grid, grid_station) = answer_of(&dxf_path, "grid");
+    let (cent, cent_station) = answer_of(&centred_path, "centred");
+    assert_eq!(grid["unit"], "mm");
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    // Relative to the room's bounding-box centre, in metres.
+    let de = (f(&grid["easting"]) / 1000.0 - (e0 + 3.0)) - f(&cent["easting"]);
+    let dn = (f(&grid["northing"]) / 1000.0 - (n0 + 2.5)) - f(&cent["northing"]);
+    assert!(de.hypot(dn) < 1e-3, "answers differ by {de}, {dn} m");
+    assert!((f(&grid["heading_deg"]) - f(&cent["heading_deg"])).abs() < 1e-6);
+    // Written to the instrument in metres, national grid.
+    assert!(
+        (grid_station[0] - (e0 + 3.0) - cent_station[0]).abs() < 1e-3,
+        "{grid_station:?} vs {cent_station:?}"
+    );
+    assert!((grid_station[1] - (n0 + 2.5) - cent_station[1]).abs() < 1e-3);
+    assert!(grid_station[0] > 2.6e6 && grid_station[1] > 1.2e6);
+}

@@ -3,6 +3,7 @@
 //! `docs/GEOCOM.md` describes the protocol, the RPCs and the fault handling.
 
 use super::SensorArgs;
+use crate::answer::{Answer, AnswerInput, HeadingHint};
 use crate::episode::{parse_agent, parse_stop_risk, EpisodeSpec};
 use crate::geocom::client::{
     Client, ClientConfig, SerialTransport, TcpTransport, Transport, DEFAULT_BAUD,
@@ -14,12 +15,11 @@ use crate::geocom::instrument::{
 use crate::geocom::rpc;
 use crate::geocom::sim::{FaultSpec, GeoComSim, SimConfig};
 use crate::learn::agent::Policies;
-use crate::answer::{Answer, AnswerInput, HeadingHint};
 use crate::world::planfile::{self, PlanFrame, PlanReadArgs};
-use activesense_core::registration::Measurement;
 use activesense_core::episode::{Action, AgentKind, EpisodeConfig};
 use activesense_core::episode::{DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_core::pipeline::Stop;
+use activesense_core::registration::Measurement;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::Serialize;
