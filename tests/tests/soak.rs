@@ -54,7 +54,9 @@ fn qemu_soak_episodes_bit_identical() {
     // The session still answers and reports the same firmware after the load.
     let again = l.client.hello().expect("hello after the soak");
     assert_eq!(again.firmware, info.firmware);
-    let out = l.close().expect("firmware shuts down with exit status 0");
+    let out = l
+        .shutdown()
+        .expect("firmware shuts down with exit status 0");
     assert!(out.contains("activesense-firmware: shutdown"), "{out}");
     assert!(!out.contains("PANIC"), "{out}");
 }
