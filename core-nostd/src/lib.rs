@@ -45,6 +45,7 @@
 //! | [`registration`] | 3.3 (observations, the registration's overview) |
 //! | [`registration::icp`] | 3.3 (Sparse ICP, Algorithm 4, equation 6; annealed perturbation, Algorithm 3) |
 //! | [`registration::fits`] | 3.3 extended (observability of the readings, range fit) |
+//! | [`registration::precision`] | the answer's precision: pose covariance from the information matrix (issue 20) |
 //! | [`registration::refine`] | 3.3 extended (multi-hypothesis refinement) |
 //! | [`registration::pose_distance`] | 3.4 (symmetry-aware pose distance, Table 2, equations 7–10) |
 //! | [`stop`] | 3.1 extended (the calibrated stop: P(wrong registration)) |
@@ -58,7 +59,7 @@
 //! | [`protocol`] | host ⇄ instrument serial protocol (`docs/protocol.md`): [`protocol::messages`], [`protocol::framing`] |
 //! | [`device`] | the device: [`device::controller`], [`device::session`], [`device::instrument`] |
 #![no_std]
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod checksum;

@@ -7,6 +7,11 @@
 //! **Modes** (semihosting command line, i.e. QEMU `-semihosting-config ...,arg=smoke` or
 //! `-append smoke`):
 //! * `smoke`: exit with status 0 right after the boot line (`cargo xtask qemu-smoke`).
+//! * `dsp-selftest`: run [`activesense_core::policy::int8::selftest`] (the int8 network's
+//!   DSP `asm!` kernels against the portable and the reference kernels, on random tensors
+//!   and the built-in policies), print `dsp-selftest: ok ...` with the instructions of one
+//!   K = 10 network pass per backend (meaningful under `-icount shift=0`), and exit 0; a
+//!   difference prints `dsp-selftest: FAILED ...` and exits 1 (`tests/tests/qemu_hil.rs`).
 //! * `bench`: serve the protocol as by default, but with the SysTick interrupt enabled
 //!   only while the core sleeps waiting for the host, so no tick handler runs inside a
 //!   timed update (`cargo xtask mcu-bench`). The millisecond clock then counts idle time
@@ -187,6 +192,9 @@ fn main() -> ! {
         defmt::info!("smoke mode: exit");
         debug::exit(debug::EXIT_SUCCESS);
     }
+    if cmdline_has(b"dsp-selftest") {
+        dsp_selftest();
+    }
     let bench = cmdline_has(b"bench");
     if bench {
         defmt::info!("bench mode: SysTick interrupt only while idle");
@@ -250,6 +258,31 @@ fn main() -> ! {
             }
         }
     }
+}
+
+/// The `dsp-selftest` mode: compare the int8 kernels on the device, report, exit.
+fn dsp_selftest() -> ! {
+    use activesense_core::policy::{builtin::POLICIES, int8::selftest};
+    start_cycle_counter();
+    match selftest::run(0x5eed, &POLICIES, Some(cycles)) {
+        Ok(r) => {
+            hprintln!(
+                "dsp-selftest: ok, {} comparisons equal; one K = 10 network pass: dsp {} / portable {} / reference {} instructions",
+                r.cases,
+                r.fast_ticks,
+                r.portable_ticks,
+                r.reference_ticks
+            );
+            hprintln!("dsp-selftest: dsp pass by layer (conv1, conv2, fc_belief, fc_side, fc_joint, actor, critic): {:?}", r.layer_ticks);
+            debug::exit(debug::EXIT_SUCCESS);
+        }
+        Err(m) => {
+            hprintln!("dsp-selftest: FAILED: {:?}", m);
+            debug::exit(debug::EXIT_FAILURE);
+        }
+    }
+    #[allow(clippy::empty_loop)]
+    loop {}
 }
 
 /// Logs the session's queued events with defmt.

@@ -31,6 +31,13 @@ enum Command {
     Train(cli::train::TrainArgs),
     /// Run episodes on the instrument controller (QEMU, serial, TCP or loopback) while the host plays its sensors.
     Sim(activesense_sim::link::remote::SimArgs),
+    /// Set up a Leica total station in the plan's frame over GeoCOM: drive it with the core
+    /// decision chain (policy, localizer, calibrated stop), print the answer and, with
+    /// --set-station, write the station and orientation to it (docs/GEOCOM.md).
+    Station(cli::station::StationArgs),
+    /// A GeoCOM instrument simulator playing a plan's room over TCP or a pty, with faults
+    /// injected on request (docs/GEOCOM.md).
+    GeocomSim(cli::station::GeocomSimArgs),
     /// Talk to an instrument controller on a serial port.
     Serial(activesense_sim::link::remote::SerialArgs),
     /// Count the firmware's instructions per update and per registration under QEMU
@@ -55,6 +62,10 @@ enum Command {
     /// learnt-agent trajectory (episode --agent learnt --json FILE) with a guided
     /// back-propagation overlay, or (--aggregate) the Fig.-4 analysis over many episodes.
     Inspect(activesense_sim::inspect::InspectArgs),
+    /// How honest the answer's printed precision is (how often the truth lies within 2σ)
+    /// and how often answers are ambiguous, over simulated episodes on generated plans or
+    /// your rooms (--plans-from).
+    AnswerCoverage(cli::answer_coverage::AnswerCoverageArgs),
     /// Fit the calibrated stop (--termination confident, --stop-risk): run episodes on
     /// calibration plans, fit P(wrong registration) from the belief and the readings, and
     /// write the models the core compiles (core-nostd/src/stop/calibration.rs) with a
@@ -105,9 +116,12 @@ fn main() -> ExitCode {
         Command::Train(a) => cli::train::run(a),
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Eval(a) => cli::eval::run(a),
+        Command::AnswerCoverage(a) => cli::answer_coverage::run(a),
         Command::Calibrate(a) => activesense_sim::calibrate::cmd_calibrate(a),
         Command::BenchRegistration(a) => cli::bench_registration::run(a),
         Command::BenchLocalization(a) => cli::bench_localization::run(a),
+        Command::Station(a) => cli::station::run(a),
+        Command::GeocomSim(a) => cli::station::run_sim(a),
         Command::Sim(a) => activesense_sim::link::remote::cmd_sim(a),
         Command::Serial(a) => activesense_sim::link::remote::cmd_serial(a),
         Command::McuBench(a) => activesense_sim::link::remote::cmd_mcu_bench(a),

@@ -421,6 +421,25 @@ fn page_steps_through_an_episode_in_headless_chromium() {
         "same step, same picture"
     );
 
+    // The last frame shows the final (refined) estimate beside the belief argmax.
+    b.eval("document.activeElement.blur()");
+    b.key("End", 35);
+    assert_eq!(b.attr("data-step"), n.to_string());
+    let legend = b.eval("document.getElementById('room-legend').textContent");
+    assert!(
+        legend
+            .as_str()
+            .unwrap()
+            .contains("final answer (refined, error 0."),
+        "{legend}"
+    );
+    b.key("Home", 36);
+    let legend = b.eval("document.getElementById('room-legend').textContent");
+    assert!(
+        !legend.as_str().unwrap().contains("final answer"),
+        "{legend}"
+    );
+
     let page_png = base64_decode(&b.screenshot(None));
     assert_eq!(&page_png[1..4], b"PNG");
     let shot = dir.join("inspect.png");

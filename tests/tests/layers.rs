@@ -36,6 +36,7 @@ const CORE_LAYERS: &[&[&str]] = &[
 const HOST_LAYERS: &[&str] = &[
     "world",
     "episode",
+    "answer",
     "baselines",
     "plot",
     "learn",
@@ -44,6 +45,7 @@ const HOST_LAYERS: &[&str] = &[
     "calibrate",
     "inspect",
     "link",
+    "geocom",
     "cli",
 ];
 

@@ -152,3 +152,32 @@ fn qemu_instruction_counts_reproducible() {
     }
     assert!(k10.vote.mean() > 5.0 * k1.vote.mean(), "{k1:?} {k10:?}");
 }
+
+/// The int8 network's DSP `asm!` kernels run only on the M4: the firmware's `dsp-selftest`
+/// mode compares them there with the portable and the reference kernels (random tensors,
+/// random layers, the built-in K = 1 and K = 10 policies) and exits 1 on any difference.
+#[test]
+fn qemu_dsp_kernels_equal_the_reference() {
+    use activesense_sim::link::qemu_cmd::{qemu_command, QemuSerial};
+    use std::process::Stdio;
+    use std::time::Instant;
+    let elf = firmware_elf();
+    let mut cmd = qemu_command("qemu-system-arm", &elf, QemuSerial::Null);
+    cmd.args(["-icount", "shift=0", "-append", "dsp-selftest"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null());
+    let mut child = cmd.spawn().expect("start qemu-system-arm");
+    let started = Instant::now();
+    while child.try_wait().expect("wait for qemu").is_none() {
+        if started.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            panic!("dsp-selftest did not finish within 120 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().expect("qemu output");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(stdout.contains("dsp-selftest: ok"), "{stdout}");
+    println!("{stdout}");
+}

@@ -9,6 +9,7 @@
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
 //! cargo xtask mcu-bench [--episodes N] [--agent NAME] [--termination T]  # instructions per update / decision / registration (QEMU -icount)
 //! cargo xtask qemu-log     # the firmware's defmt log (smoke boot + one session), decoded
+//! cargo xtask soak [--episodes N]  # N episodes in one QEMU session, each bit-identical to the host
 //! cargo xtask reproduce [--list] [--only A,B] [--skip A,B] [--resume] [--check]  # every committed artifact
 //! ```
 
@@ -43,6 +44,7 @@ fn main() {
         Some("fuzz") => fuzz::run(&args[1..]),
         Some("mcu-bench") => mcu_bench(&args[1..]),
         Some("qemu-log") => qemu_log::run_task(),
+        Some("soak") => soak(&args[1..]),
         Some("reproduce") => reproduce::run(&args[1..]),
         Some("help") | Some("--help") | Some("-h") | None => {
             print_help();
@@ -68,6 +70,9 @@ fn print_help() {
          firmware    build the firmware ELF and print its path\n  \
          qemu-smoke  boot the firmware under qemu-system-arm -M netduinoplus2 and check its boot line\n  \
          qemu-log    decode the firmware's defmt log (smoke boot and one short session)\n  \
+         soak [--episodes N]\n              \
+         N consecutive episodes (default 500) in one QEMU session of the firmware, both K,\n              \
+         heuristic-1 and learnt-int8, oracle and confident stop, each bit-identical to the host\n  \
          size        firmware flash / static RAM against the budgets (512 KiB / 96 KiB)\n  \
          fuzz [SECS] run the cargo-fuzz targets `session` and `policy_blob` for SECS seconds each (default 60)\n  \
          mcu-bench [--episodes N] [--agent NAME] [--termination T]\n              \
@@ -288,6 +293,43 @@ fn mcu_bench(args: &[String]) -> Result<()> {
             "--elf",
         ])
         .arg(&elf))
+}
+
+/// `cargo xtask soak [--episodes N]`: the soak test (`tests/tests/soak.rs`) with N episodes
+/// (default 500) in one QEMU session; CI runs its 8-episode default.
+fn soak(args: &[String]) -> Result<()> {
+    let mut episodes = 500u32;
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--episodes" => {
+                episodes = it
+                    .next()
+                    .context("--episodes needs a number")?
+                    .parse()
+                    .context("--episodes needs a number")?
+            }
+            other => bail!("soak: unknown argument '{other}'"),
+        }
+    }
+    setup()?;
+    let started = Instant::now();
+    run(cargo()
+        .args([
+            "test",
+            "-p",
+            "activesense-tests",
+            "--test",
+            "soak",
+            "--",
+            "--nocapture",
+        ])
+        .env("ACTIVESENSE_SOAK_EPISODES", episodes.to_string()))?;
+    println!(
+        "soak: {episodes} episodes ok ({:.0} s)",
+        started.elapsed().as_secs_f32()
+    );
+    Ok(())
 }
 
 /// The whole test suite: installs, formatting, the MCU build of the core, the firmware under

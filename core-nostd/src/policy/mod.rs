@@ -150,16 +150,10 @@ impl PolicyInput<'_> {
         self.fill_belief(out, q(0.0), q)
     }
 
-    /// The one belief extraction both writers share: `map(probability / peak)` per cell,
-    /// `blank` outside the grid.
-    fn fill_belief<T: Copy>(&self, out: &mut [T], blank: T, map: impl Fn(f32) -> T) -> usize {
+    /// The value of every belief level (`table[level]`) and of a cell outside the room,
+    /// each `map(probability / peak)`.
+    fn level_table<T: Copy>(&self, map: impl Fn(f32) -> T) -> ([T; 256], T) {
         let loc = self.localizer;
-        let n = self.belief_len();
-        if !loc.is_ready() || out.len() < n {
-            return 0;
-        }
-        let g = loc.grid();
-        let (nx, ny) = (g.nx as usize, g.ny as usize);
         // A cell's probability is a function of its level (0..=255) alone, and increases
         // with it: the peak is the top level's (the localizer keeps it), and each cell's value is one of 256, each
         // computed by exactly the arithmetic `prob(i) * scale` would do. On the Cortex-M4 this
@@ -174,6 +168,44 @@ impl PolicyInput<'_> {
                 *t = map(loc.prob_of_level(Some(m as u8)) * scale);
             }
         }
+        (table, outside)
+    }
+
+    /// The quantised belief map of [`PolicyInput::write_belief_q`] in the int8 network's
+    /// convolution layout (`crate::policy::int8::fast`): cell `(bin, y, x)` at
+    /// `out[((y + 1)·side + x + 1)·K + bin]`, the `K` planes of a pixel adjacent, one row and
+    /// column of padding before the map. Writes only the map's cells (the caller fills the
+    /// rest with the zero point, the quantised 0). Returns `belief_len()`, or 0 when the
+    /// localizer is not ready or `out` is shorter than `side² · K` or `side ≤ BELIEF_SIDE`.
+    pub fn write_belief_q_hwc(
+        &self,
+        out: &mut [i8],
+        scale: f32,
+        zero_point: i32,
+        side: usize,
+    ) -> usize {
+        let loc = self.localizer;
+        let k = self.belief_planes();
+        if !loc.is_ready() || side <= BELIEF_SIDE || out.len() < side * side * k {
+            return 0;
+        }
+        let p = crate::policy::int8::QuantParams { scale, zero_point };
+        let (table, outside) = self.level_table(|v| crate::policy::int8::quantize_value(v, p));
+        loc.write_levels_interleaved(out, side, BELIEF_SIDE, &table, outside);
+        self.belief_len()
+    }
+
+    /// The one belief extraction both writers share: `map(probability / peak)` per cell,
+    /// `blank` outside the grid.
+    fn fill_belief<T: Copy>(&self, out: &mut [T], blank: T, map: impl Fn(f32) -> T) -> usize {
+        let loc = self.localizer;
+        let n = self.belief_len();
+        if !loc.is_ready() || out.len() < n {
+            return 0;
+        }
+        let g = loc.grid();
+        let (nx, ny) = (g.nx as usize, g.ny as usize);
+        let (table, outside) = self.level_table(map);
         if nx == BELIEF_SIDE && ny == BELIEF_SIDE {
             // The grid is the map: flat cell index = output index.
             loc.for_each_level(|i, lv| {
@@ -296,6 +328,23 @@ mod tests {
                         (loc.prob(i) * scale).to_bits(),
                         "cell {i}"
                     );
+                }
+                // The int8 network's padded, channel-interleaved map holds the same
+                // quantised values as the planar one, the zero point around them.
+                let (scale_q, zp) = (1.0 / 255.0, -128);
+                let mut planar = [0i8; 10 * BELIEF_PLANE];
+                assert_eq!(input.write_belief_q(&mut planar, scale_q, zp), n);
+                let (side, kb) = (BELIEF_SIDE + 1, cfg.rot_bins as usize);
+                let mut hwc = [zp as i8; 31 * 31 * 10];
+                assert_eq!(input.write_belief_q_hwc(&mut hwc, scale_q, zp, side), n);
+                for (i, &v) in hwc[..side * side * kb].iter().enumerate() {
+                    let (y, x, b) = (i / kb / side, i / kb % side, i % kb);
+                    let want = if x == 0 || y == 0 {
+                        zp as i8
+                    } else {
+                        planar[b * BELIEF_PLANE + (y - 1) * BELIEF_SIDE + x - 1]
+                    };
+                    assert_eq!(v, want, "bin {b} y {y} x {x}");
                 }
                 let bearing = k as f32 * 0.9;
                 let hit = plan

@@ -82,6 +82,7 @@
 pub mod fits;
 pub mod icp;
 pub mod pose_distance;
+pub mod precision;
 pub mod refine;
 
 pub use fits::*;

@@ -2,6 +2,7 @@
 //! print its step log and outcome; optionally write the trajectory as JSON and an SVG.
 
 use super::{write_file, SensorArgs};
+use crate::answer::{parse_heading_hint, Answer, HeadingHint};
 use crate::episode::{
     parse_agent, parse_observability, parse_stop_risk, scan_string, termination_parser,
     EpisodeSpec, Trajectory,
@@ -70,6 +71,16 @@ pub struct EpisodeArgs {
     /// Write an SVG of the room, agent and measurement beams here.
     #[arg(long)]
     svg: Option<PathBuf>,
+    /// Write the answer alone as JSON here (the station in the plan's coordinates, its
+    /// precision, candidates, ambiguity; `--json` embeds the same object as "answer").
+    #[arg(long)]
+    answer_json: Option<PathBuf>,
+    /// An approximate heading, DEG±TOL (e.g. 160±20; degrees counter-clockwise from the
+    /// plan's +x axis, as the answer prints it): breaks the tie between the poses a
+    /// symmetric room leaves when the heading is unknown (from the instrument's compass or
+    /// the site plan).
+    #[arg(long, value_parser = parse_heading_hint, allow_hyphen_values = true)]
+    heading_hint: Option<HeadingHint>,
     /// Print only the summary, not every step.
     #[arg(long)]
     quiet: bool,
@@ -81,7 +92,9 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
     let (policies, t) = play(&a, &spec)?;
     print_log(&spec, &t, &policies, a.quiet);
     print_outcome(&t);
-    write_outputs(&a, &spec, &t)
+    let answer = Answer::of_trajectory(&t, a.heading_hint);
+    print!("{}", answer.to_text());
+    write_outputs(&a, &spec, &t, &answer)
 }
 
 /// The episode the options describe (a generated plan or the user's room).
@@ -220,11 +233,15 @@ fn print_outcome(t: &Trajectory) {
         } else {
             "coarse estimate:"
         };
-        println!("{what}  {}  error {:.3} m", fmt_pose(&c), e);
+        println!(
+            "{what}  {}  pose distance {:.3} m (model frame)",
+            fmt_pose(&c),
+            e
+        );
     }
     match (&o.refined, o.pose_error) {
         (Some(r), Some(e)) => println!(
-            "refined estimate: {}  error {:.4} m (registration rms {:.4} m, {} inliers)",
+            "refined estimate: {}  pose distance {:.4} m (model frame; position and heading in one number, modulo the room's symmetry: the benchmark's score; the answer below gives them apart), registration rms {:.4} m over {} inliers",
             fmt_pose(&r.pose),
             e,
             r.error,
@@ -256,16 +273,37 @@ fn print_outcome(t: &Trajectory) {
 }
 
 /// The trajectory JSON (`--json`) and the episode picture (`--svg`).
-fn write_outputs(a: &EpisodeArgs, spec: &EpisodeSpec, t: &Trajectory) -> Result<()> {
+fn write_outputs(
+    a: &EpisodeArgs,
+    spec: &EpisodeSpec,
+    t: &Trajectory,
+    answer: &Answer,
+) -> Result<()> {
     let o = &t.outcome;
     if let Some(path) = &a.json {
+        // The trajectory with the answer beside it (`inspect` reads the trajectory and
+        // ignores the extra member).
+        #[derive(serde::Serialize)]
+        struct WithAnswer<'a> {
+            #[serde(flatten)]
+            trajectory: &'a Trajectory,
+            answer: &'a Answer,
+        }
+        let value = WithAnswer {
+            trajectory: t,
+            answer,
+        };
         // The inspection arrays (K × 900 floats per step) are written compactly.
         let text = if t.inspection.is_some() {
-            serde_json::to_string(t)?
+            serde_json::to_string(&value)?
         } else {
-            serde_json::to_string_pretty(t)?
+            serde_json::to_string_pretty(&value)?
         };
         write_file(path, &text)?;
+        println!("wrote {}", path.display());
+    }
+    if let Some(path) = &a.answer_json {
+        write_file(path, &serde_json::to_string_pretty(answer)?)?;
         println!("wrote {}", path.display());
     }
     if let Some(path) = &a.svg {

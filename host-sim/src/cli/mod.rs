@@ -3,6 +3,7 @@
 //! model) and the small helpers they all use (writing a file, the command line as typed)
 //! live in this module.
 
+pub mod answer_coverage;
 pub mod bench_localization;
 pub mod bench_registration;
 pub mod dataset;
@@ -10,6 +11,7 @@ pub mod episode;
 pub mod eval;
 pub mod plan;
 pub mod policy;
+pub mod station;
 pub mod train;
 
 use crate::world::sensor::SensorModel;

@@ -105,9 +105,15 @@ window.addEventListener("error", function (e) {
     drawPose(ctx, P, T.truth, "#2e7d32", 5);
     var est = s.t > 0 ? T.steps[s.t - 1].argmax : null;
     if (est) drawPose(ctx, P, est, "#8e24aa", 4);
+    // The last frame also shows the episode's answer: the refined pose, which can sit far
+    // from the belief argmax (the refinement fits the readings, the argmax is a grid cell).
+    var o = T.outcome, fin = s.t === N - 1 && o.refined ? o.refined.pose : null;
+    if (fin) drawPose(ctx, P, fin, "#ef6c00", 4);
     el("room-legend").innerHTML =
       '<span class="sw" style="background:#2e7d32"></span>instrument (truth)' +
       '<span class="sw" style="background:#8e24aa"></span>estimate (belief argmax' + (est ? "" : ": none yet") + ')' +
+      (fin ? '<span class="sw" style="background:#ef6c00"></span>final answer (refined' +
+        (o.pose_error !== null && o.pose_error !== undefined ? ", error " + o.pose_error.toFixed(4) + " m" : "") + ')' : "") +
       '<span class="sw" style="background:#1565c0"></span>ranges' +
       '<span class="sw" style="background:#d08000"></span>outliers' +
       '<span class="sw" style="background:#c62828"></span>beam now' +

@@ -74,6 +74,10 @@ pub struct RemoteEpisodeArgs {
     /// its RAM stays. (A `loopback` or `qemu` device this command started ends with it.)
     #[arg(long)]
     pub shutdown: bool,
+    /// An approximate heading, DEG±TOL (degrees counter-clockwise from the plan's +x axis):
+    /// breaks the tie between the poses a symmetric room leaves (see `episode --help`).
+    #[arg(long, value_parser = crate::answer::parse_heading_hint, allow_hyphen_values = true)]
+    pub heading_hint: Option<crate::answer::HeadingHint>,
 }
 
 /// `activesense sim`.
@@ -290,6 +294,31 @@ fn print_run(
     t.cost += r.cost as f64;
 }
 
+/// The episode's answer ([`crate::answer::Answer`]) in the plan's coordinates, indented
+/// under its report line.
+fn print_answer(
+    label: &str,
+    run: &EpisodeRun,
+    plan: &FloorPlan,
+    frame: &crate::world::planfile::PlanFrame,
+    params: &EpisodeParams,
+    a: &RemoteEpisodeArgs,
+) {
+    let answer = crate::answer::Answer::of_report(
+        label.to_string(),
+        plan,
+        frame,
+        params,
+        &run.report,
+        &run.steps,
+        SensorModel::default().sigma,
+        a.heading_hint,
+    );
+    for line in answer.to_text().lines() {
+        println!("  {line}");
+    }
+}
+
 fn print_totals(t: &Totals, secs: f64) {
     let n = t.episodes.max(1) as f64;
     println!(
@@ -358,6 +387,15 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
         .with_context(|| format!("episode on {label}"))?;
         let (plan, params, _) = sim_episode(spec);
         print_run(label, &run, &plan, &params, &mut t);
+        let frame = spec.user_plan.as_ref().map(|p| p.frame.clone());
+        print_answer(
+            label,
+            &run,
+            &plan,
+            &frame.unwrap_or_default(),
+            &params,
+            &a.episode,
+        );
     }
     let status = link.client.status().context("status")?;
     println!(
@@ -412,7 +450,7 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             for w in &loaded.warnings {
                 eprintln!("warning: {}: {w}", loaded.plan.name);
             }
-            let plan = loaded.plan.plan;
+            let plan = loaded.plan.plan.clone();
             let spec = LinkSpec::Serial {
                 path: r.port.clone(),
                 baud: r.baud,
@@ -442,6 +480,14 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
                     .with_context(|| format!("episode {i} on {}", r.port))?;
                 let (p, params, _) = mk();
                 print_run(&format!("episode {i}"), &run, &p, &params, &mut t);
+                print_answer(
+                    &format!("episode {i}"),
+                    &run,
+                    &p,
+                    &loaded.plan.frame,
+                    &params,
+                    &r.episode,
+                );
             }
             if r.episode.verify {
                 println!(
@@ -603,6 +649,7 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
             timeout_ms: Some(a.timeout_ms),
             verify: false,
             shutdown: false,
+            heading_hint: None,
         };
         let mut row = McuBenchRow {
             rot_bins,

@@ -135,22 +135,55 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
         }
     }
 
-    for (pose, colour, label) in [
+    // Agent and estimate: markers first, then the labels, each on the side away from the
+    // other pose, so that they never overlap however close the two are.
+    let marks: Vec<(Pose2, &str, &str)> = [
         (scene.agent, "#c1121f", "agent"),
         (scene.estimate, "#6a4c93", "estimate"),
-    ] {
-        if let Some(p) = pose {
-            let a = p.translation();
-            let (x, y) = f.px(a);
-            let tip = a + unit(p.theta) * (28.0 / scale);
-            let (tx, ty) = f.px(tip);
-            let _ = writeln!(
-                s,
-                r#"<line x1="{x:.1}" y1="{y:.1}" x2="{tx:.1}" y2="{ty:.1}" stroke="{colour}" stroke-width="3"/><circle cx="{x:.1}" cy="{y:.1}" r="6" fill="{colour}"/><text x="{:.1}" y="{:.1}" fill="{colour}">{label}</text>"#,
-                x + 9.0,
-                y - 9.0
-            );
-        }
+    ]
+    .into_iter()
+    .filter_map(|(p, c, l)| p.map(|p| (p, c, l)))
+    .collect();
+    for (p, colour, _) in &marks {
+        let a = p.translation();
+        let (x, y) = f.px(a);
+        let tip = a + unit(p.theta) * (28.0 / scale);
+        let (tx, ty) = f.px(tip);
+        let _ = writeln!(
+            s,
+            r#"<line x1="{x:.1}" y1="{y:.1}" x2="{tx:.1}" y2="{ty:.1}" stroke="{colour}" stroke-width="3"/><circle cx="{x:.1}" cy="{y:.1}" r="6" fill="{colour}"/>"#
+        );
+    }
+    let px: Vec<(f32, f32)> = marks
+        .iter()
+        .map(|(p, _, _)| f.px(p.translation()))
+        .collect();
+    for (k, (_, colour, label)) in marks.iter().enumerate() {
+        let dir = if marks.len() == 2 {
+            let (o, q) = (px[k], px[1 - k]);
+            let (dx, dy) = (o.0 - q.0, o.1 - q.1);
+            let n = (dx * dx + dy * dy).sqrt();
+            if n < 1.0 {
+                // Same spot: agent label above, estimate below.
+                if k == 0 {
+                    (0.0, -1.0)
+                } else {
+                    (0.0, 1.0)
+                }
+            } else {
+                (dx / n, dy / n)
+            }
+        } else {
+            (
+                std::f32::consts::FRAC_1_SQRT_2,
+                -std::f32::consts::FRAC_1_SQRT_2,
+            )
+        };
+        let (x, y, anchor) = label_at(px[k], dir);
+        let _ = writeln!(
+            s,
+            r#"<text x="{x:.1}" y="{y:.1}" fill="{colour}" text-anchor="{anchor}">{label}</text>"#
+        );
     }
 
     // Scale bar: the largest "nice" length below a quarter of the drawing.
@@ -176,7 +209,8 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
     let items = [
         ("#1f5fbf", "+ perimeter centroid (model origin)"),
         ("#2a9d8f", "× visual centre, placement disc"),
-        ("#c1121f", "● agent, heading"),
+        ("#c1121f", "● agent (truth), heading"),
+        ("#6a4c93", "● estimate (refined), heading"),
         ("#e9c46a", "— measurement"),
         ("#e76f51", "— outlier"),
     ];
@@ -191,6 +225,34 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
     }
     s.push_str("</svg>\n");
     s
+}
+
+/// Where a marker's label goes: 16 px from the marker centre along `dir` (pixels, y down),
+/// anchored so that the text extends away from the marker.
+fn label_at(p: (f32, f32), dir: (f32, f32)) -> (f32, f32, &'static str) {
+    let anchor = if dir.0 > 0.38 {
+        "start"
+    } else if dir.0 < -0.38 {
+        "end"
+    } else {
+        "middle"
+    };
+    // Text sits on its baseline: below the marker it needs its height (13 px) more.
+    let y = p.1 + 16.0 * dir.1 + if dir.1 > 0.38 { 12.0 } else { 4.0 };
+    (p.0 + 16.0 * dir.0, y, anchor)
+}
+
+/// The pixel box a label of `chars` characters occupies (13 px sans-serif, ≈ 7 px a
+/// character) at `(x, y, anchor)`: `(left, top, right, bottom)`.
+#[cfg(test)]
+fn label_box(x: f32, y: f32, anchor: &str, chars: usize) -> (f32, f32, f32, f32) {
+    let w = 7.0 * chars as f32;
+    let left = match anchor {
+        "start" => x,
+        "end" => x - w,
+        _ => x - w / 2.0,
+    };
+    (left, y - 11.0, left + w, y + 3.0)
 }
 
 fn xml(t: &str) -> String {
@@ -221,5 +283,48 @@ mod tests {
         assert!(svg.contains("&lt;1000000&gt; &amp; co"));
         assert_eq!(svg.matches("<polygon").count(), 1);
         assert!(svg.contains(" m</text>"), "scale bar label");
+    }
+
+    #[test]
+    fn agent_and_estimate_labels_never_overlap() {
+        let plan = plans::generate(plans::TEST_SEEDS.start);
+        // The estimate on the agent, a hair off, and at a few pixels in every direction.
+        let mut offsets = vec![(0.0, 0.0), (0.001, 0.0)];
+        for k in 0..16 {
+            let a = k as f32 * std::f32::consts::TAU / 16.0;
+            for r in [0.02f32, 0.1, 0.3] {
+                offsets.push((r * a.cos(), r * a.sin()));
+            }
+        }
+        for (dx, dy) in offsets {
+            let agent = Pose2::new(0.3, -0.2, 1.0);
+            let est = Pose2::new(0.3 + dx, -0.2 + dy, 1.1);
+            let svg = render(
+                &plan,
+                &Scene {
+                    agent: Some(agent),
+                    estimate: Some(est),
+                    ..Default::default()
+                },
+            );
+            let label = |name: &str| {
+                let line = svg
+                    .lines()
+                    .find(|l| l.contains(&format!(">{name}</text>")))
+                    .unwrap_or_else(|| panic!("no {name} label"));
+                let attr = |a: &str| {
+                    let i = line.find(&format!(" {a}=\"")).unwrap() + a.len() + 3;
+                    line[i..].split('"').next().unwrap().to_string()
+                };
+                let (x, y) = (attr("x").parse().unwrap(), attr("y").parse().unwrap());
+                label_box(x, y, &attr("text-anchor"), name.len())
+            };
+            let (a, e) = (label("agent"), label("estimate"));
+            let apart = a.2 <= e.0 || e.2 <= a.0 || a.3 <= e.1 || e.3 <= a.1;
+            assert!(apart, "offset ({dx}, {dy}): agent {a:?} estimate {e:?}");
+        }
+        // The legend names the estimate.
+        let svg = render(&plan, &Scene::default());
+        assert!(svg.contains("estimate (refined)"));
     }
 }

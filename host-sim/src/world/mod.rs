@@ -142,6 +142,14 @@ impl SimWorld {
         Observation::pack_scan(&px)
     }
 
+    /// One EDM reading along the model-frame direction `angle`, from the world's random
+    /// stream, without moving the encoder (the GeoCOM simulator's telescope can stand
+    /// between encoder steps when a client positions it there).
+    pub fn measure_along(&mut self, angle: f32) -> (Option<f32>, RangeKind) {
+        self.sensor
+            .measure(&self.plan, self.position(), angle, &mut self.rng)
+    }
+
     /// Executes one action on the instrument and returns its observation.
     pub fn act(&mut self, action: Action) -> (Observation, StepTruth) {
         self.state.apply(action);

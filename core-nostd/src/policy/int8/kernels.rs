@@ -33,23 +33,23 @@ pub fn saturating_rounding_doubling_high_mul(a: i32, b: i32) -> i32 {
     if a == i32::MIN && b == i32::MIN {
         return i32::MAX;
     }
-    let ab = a as i64 * b as i64;
-    let nudge: i64 = if ab >= 0 { 1 << 30 } else { 1 - (1 << 30) };
-    // Division by 2³¹ truncating toward zero, as C's `/` in the reference, but with shifts:
-    // a 64-bit division is a library call of hundreds of instructions on the Cortex-M4.
-    let x = ab + nudge;
-    (if x >= 0 { x >> 31 } else { -((-x) >> 31) }) as i32
+    // gemmlowp adds 2³⁰ (or 1 − 2³⁰ below 0) and divides by 2³¹ truncating toward zero;
+    // for a negative sum that truncation is the floor of (sum + 2³¹ − 1) / 2³¹, so both
+    // cases are one floor: (a·b + 2³⁰) >> 31, a multiply-accumulate and a shift on the
+    // Cortex-M4 (a 64-bit division would be a library call of hundreds of instructions).
+    // Outside a = b = i32::MIN the result fits an i32.
+    ((a as i64 * b as i64 + (1 << 30)) >> 31) as i32
 }
 
 /// gemmlowp's `RoundingDivideByPOT`: `x / 2^exponent` rounded half away from zero
-/// (`exponent` is clamped to `0..=31`).
+/// (`exponent` is clamped to `0..=31`). All in 32 bits: the mask, the remainder and the
+/// threshold stay below 2³¹.
 pub fn rounding_divide_by_pot(x: i32, exponent: i32) -> i32 {
-    let e = exponent.clamp(0, 31);
-    let mask = (1i64 << e) - 1;
-    let x = x as i64;
+    let e = exponent.clamp(0, 31) as u32;
+    let mask = ((1u32 << e) - 1) as i32;
     let remainder = x & mask;
-    let threshold = (mask >> 1) + i64::from(x < 0);
-    ((x >> e) + i64::from(remainder > threshold)) as i32
+    let threshold = (mask >> 1) + i32::from(x < 0);
+    (x >> e) + i32::from(remainder > threshold)
 }
 
 /// `arm_nn_requantize` / TFLite `MultiplyByQuantizedMultiplier`: `x · multiplier · 2^shift

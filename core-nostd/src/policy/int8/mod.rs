@@ -30,14 +30,21 @@
 use crate::episode::Action;
 
 pub mod agent;
+pub mod dot;
+#[cfg(target_arch = "arm")]
+#[allow(unsafe_code)]
+pub mod dsp;
 pub mod error;
+mod fast;
 pub mod kernels;
+pub mod selftest;
 pub mod write;
 
 use crate::checksum::crc32;
 use crate::localization::MAX_ROT_BINS;
 use crate::policy::{PolicyInput, BELIEF_PLANE, BELIEF_SIDE, SIDE_FEATURES};
 pub use agent::{QuantizedAgent, ScratchAgent};
+use dot::{Dot, Fast};
 pub use error::BlobError;
 pub use kernels::*;
 pub use write::{blob_len, write_blob, LayerTensors};
@@ -263,17 +270,22 @@ pub struct Decision {
 }
 
 /// The activations of one inference (the int8 inputs and every hidden layer's output), all
-/// sized for the largest `K`. About 12 KiB; keep it in a `static` on the device.
+/// sized for the largest `K`, and the convolution weights widened for the DSP kernels
+/// (`fast`, on the stack during a decision). About 11 KiB; keep it in a `static` on the device.
 #[derive(Clone, Debug)]
 pub struct Scratch {
-    belief: [i8; MAX_BELIEF_LEN],
+    /// The belief map in the convolutions' padded, channel-interleaved layout.
+    belief: [i8; fast::X1_LEN],
     side: [i8; SIDE_FEATURES],
     acts: Activations,
 }
 
+/// The activations kept after a decision (for logs and tests). conv1's padded output and
+/// the widened conv weights (3.2 KB) live on the stack during the decision instead: the
+/// decision's call chain is shallow, while the firmware's deepest one (the refinement)
+/// needs every byte of stack the statics leave.
 #[derive(Clone, Debug)]
 struct Activations {
-    a1: [i8; C1 * S1 * S1],
     a2: [i8; FLAT],
     cat: [i8; 2 * HIDDEN],
     joint: [i8; HIDDEN],
@@ -282,19 +294,16 @@ struct Activations {
 /// RAM of a [`Scratch`]: every activation and the int8 inputs for `K` = 10.
 pub const SCRATCH_BYTES: usize = core::mem::size_of::<Scratch>();
 
-// The device's RAM budget for activations and scratch: 24 KiB (12 124 bytes used).
+// The device's RAM budget for activations and scratch: 24 KiB (10 938 bytes used).
 const _: () = assert!(SCRATCH_BYTES <= 24 * 1024);
-const _: () =
-    assert!(SCRATCH_BYTES == MAX_BELIEF_LEN + SIDE_FEATURES + C1 * S1 * S1 + FLAT + 3 * HIDDEN);
 
 impl Scratch {
     /// Zeroed scratch (`const`, for a `static`).
     pub const fn new() -> Self {
         Scratch {
-            belief: [0; MAX_BELIEF_LEN],
+            belief: [0; fast::X1_LEN],
             side: [0; SIDE_FEATURES],
             acts: Activations {
-                a1: [0; C1 * S1 * S1],
                 a2: [0; FLAT],
                 cat: [0; 2 * HIDDEN],
                 joint: [0; HIDDEN],
@@ -615,12 +624,15 @@ impl<'a> QuantizedPolicy<'a> {
         }
         let Scratch { belief, side, acts } = scratch;
         let p = self.belief_input;
-        if input.write_belief_q(belief, p.scale, p.zero_point) == 0 {
+        let k = self.rot_bins as usize;
+        let x1 = &mut belief[..fast::padded_side(S1) * fast::padded_side(S1) * k];
+        // The padding and any cell the grid lacks are real 0: the zero point.
+        x1.fill(p.zero_point as i8);
+        if input.write_belief_q_hwc(x1, p.scale, p.zero_point, fast::padded_side(S1)) == 0 {
             return Err(RunError::NotReady);
         }
         self.quantize_side(input, side);
-        let belief = belief.get(..self.belief_len()).ok_or(RunError::BadInput)?;
-        self.run(belief, side, acts)
+        self.run::<Fast>(belief, side, acts)
     }
 
     /// One decision from already quantised inputs (`belief`: `K × 900`, `[plane][y][x]`).
@@ -630,22 +642,94 @@ impl<'a> QuantizedPolicy<'a> {
         side: &[i8; SIDE_FEATURES],
         scratch: &mut Scratch,
     ) -> Result<Decision, RunError> {
+        self.infer_with::<Fast>(belief, side, scratch)
+    }
+
+    /// [`QuantizedPolicy::infer`] on the inner products of backend `D` ([`dot::Portable`],
+    /// or `dsp::Dsp` on the M4): what the self-test compares.
+    pub fn infer_with<D: Dot>(
+        &self,
+        belief: &[i8],
+        side: &[i8; SIDE_FEATURES],
+        scratch: &mut Scratch,
+    ) -> Result<Decision, RunError> {
         if belief.len() != self.belief_len() {
             return Err(RunError::BadInput);
         }
-        self.run(belief, side, &mut scratch.acts)
+        let k = self.rot_bins as usize;
+        let s = fast::padded_side(S1);
+        let x1 = &mut scratch.belief[..s * s * k];
+        x1.fill(self.belief_input.zero_point as i8);
+        for (c, plane) in belief.chunks_exact(BELIEF_PLANE).enumerate() {
+            for (y, row) in plane.chunks_exact(BELIEF_SIDE).enumerate() {
+                for (x, &v) in row.iter().enumerate() {
+                    x1[((y + 1) * s + x + 1) * k + c] = v;
+                }
+            }
+        }
+        self.run::<D>(&scratch.belief, side, &mut scratch.acts)
     }
 
-    fn run(
+    /// One decision from the inputs `scratch` already holds (the padded belief map and
+    /// the side features), on backend `D`: for the self-test.
+    fn run_in<D: Dot>(&self, scratch: &mut Scratch) -> Result<Decision, RunError> {
+        let Scratch { belief, side, acts } = scratch;
+        self.run::<D>(belief, side, acts)
+    }
+
+    fn run<D: Dot>(
         &self,
         belief: &[i8],
         side: &[i8; SIDE_FEATURES],
         acts: &mut Activations,
     ) -> Result<Decision, RunError> {
         let l = &self.layers;
-        let Activations { a1, a2, cat, joint } = acts;
+        let Activations { a2, cat, joint } = acts;
+        let mut a1 = [0i8; fast::X2_LEN];
+        let mut work = fast::ConvWork::new();
+        let work = &mut work;
         // Architecture 2 uses a prefix of each buffer (sized for architecture 1).
         let len = |i: usize| l[i].dims.output_len();
+        let a2 = a2.get_mut(..len(L_CONV2)).ok_or(RunError::BadInput)?;
+        let h = len(L_BELIEF);
+        let cat = cat.get_mut(..2 * h).ok_or(RunError::BadInput)?;
+        let joint = joint.get_mut(..len(L_JOINT)).ok_or(RunError::BadInput)?;
+        let s2 = fast::padded_side(S2);
+        let a1p = a1.get_mut(..s2 * s2 * C1).ok_or(RunError::BadInput)?;
+        fast::conv::<D>(&l[L_CONV1], belief, work, fast::ConvOut::Padded(a1p, s2));
+        fast::conv::<D>(&l[L_CONV2], &a1[..], work, fast::ConvOut::Planar(a2));
+        let (hb, hs) = cat.split_at_mut(h);
+        fast::fully_connected_i8::<D>(&l[L_BELIEF], a2, hb);
+        fast::fully_connected_i8::<D>(&l[L_SIDE], side, hs);
+        fast::fully_connected_i8::<D>(&l[L_JOINT], cat, joint);
+        let mut logits = [0i32; 3];
+        fast::fully_connected_i32::<D>(&l[L_ACTOR], joint, &mut logits);
+        let mut value = [0i32; 1];
+        fast::fully_connected_i32::<D>(&l[L_CRITIC], joint, &mut value);
+        Ok(Decision {
+            action: ACTIONS[argmax(&logits)],
+            logits,
+            value: value[0],
+        })
+    }
+
+    /// One decision by the reference kernels of [`kernels`] (planar layout, one product at
+    /// a time, activations on the stack): what the fast path is tested against.
+    #[inline(never)]
+    pub fn infer_reference(
+        &self,
+        belief: &[i8],
+        side: &[i8; SIDE_FEATURES],
+    ) -> Result<Decision, RunError> {
+        if belief.len() != self.belief_len() {
+            return Err(RunError::BadInput);
+        }
+        let l = &self.layers;
+        let len = |i: usize| l[i].dims.output_len();
+        let mut a1 = [0i8; C1 * S1 * S1];
+        let mut a2 = [0i8; FLAT];
+        let mut cat = [0i8; 2 * HIDDEN];
+        let mut joint = [0i8; HIDDEN];
         let a1 = a1.get_mut(..len(L_CONV1)).ok_or(RunError::BadInput)?;
         let a2 = a2.get_mut(..len(L_CONV2)).ok_or(RunError::BadInput)?;
         let h = len(L_BELIEF);
@@ -907,6 +991,55 @@ mod tests {
         (if r1 < 0 { -mag } else { mag }) as i64
     }
 
+    /// The 32-bit / one-floor forms of the two gemmlowp helpers equal gemmlowp's own
+    /// formulation (nudge, truncating division; 64-bit remainder arithmetic) for every sign.
+    #[test]
+    fn gemmlowp_helpers_equal_their_literal_forms() {
+        fn srdhm(a: i32, b: i32) -> i32 {
+            if a == i32::MIN && b == i32::MIN {
+                return i32::MAX;
+            }
+            let ab = a as i64 * b as i64;
+            let nudge: i64 = if ab >= 0 { 1 << 30 } else { 1 - (1 << 30) };
+            ((ab + nudge) / (1i64 << 31)) as i32
+        }
+        fn rdbp(x: i32, e: i32) -> i32 {
+            let e = e.clamp(0, 31);
+            let mask = (1i64 << e) - 1;
+            let x = x as i64;
+            let threshold = (mask >> 1) + i64::from(x < 0);
+            ((x >> e) + i64::from((x & mask) > threshold)) as i32
+        }
+        let mut rng = Pcg32::seed_from_u64(3);
+        let edge = [
+            0,
+            1,
+            -1,
+            i32::MIN,
+            i32::MAX,
+            i32::MIN + 1,
+            1 << 30,
+            -(1 << 30),
+            3,
+            -3,
+        ];
+        for i in 0..300_000u32 {
+            let pick = |rng: &mut Pcg32| match rng.next_u32() % 3 {
+                0 => edge[rng.next_u32() as usize % edge.len()],
+                1 => rng.next_u32() as i32 >> (rng.next_u32() % 32),
+                _ => rng.next_u32() as i32,
+            };
+            let (a, b) = (pick(&mut rng), pick(&mut rng));
+            assert_eq!(
+                saturating_rounding_doubling_high_mul(a, b),
+                srdhm(a, b),
+                "{a} {b}"
+            );
+            let e = (i % 40) as i32 - 4;
+            assert_eq!(rounding_divide_by_pot(a, e), rdbp(a, e), "{a} {e}");
+        }
+    }
+
     #[test]
     fn requantisation_matches_an_i128_reference() {
         let mut rng = Pcg32::seed_from_u64(7);
@@ -1043,7 +1176,8 @@ mod tests {
         let p = QuantizedPolicy::parse(&blob).unwrap();
         belief[31] = 9;
         p.infer(&belief, &side, &mut s).unwrap();
-        assert_eq!(s.acts.a1[0], 9);
+        // conv1's output (0, 0) = 9, which conv2's centre tap passes to its output (0, 0).
+        assert_eq!(s.acts.a2[0], 9);
         assert_eq!(
             p.infer(&belief[..899], &side, &mut s),
             Err(RunError::BadInput)
@@ -1069,6 +1203,19 @@ mod tests {
                 assert_eq!(a, b, "seed {seed} layer {li}");
             }
         }
+    }
+
+    /// The fast layers (padded layout, widened weights; the DSP kernels on the M4, where the
+    /// firmware's `dsp-selftest` runs this same check) equal the reference kernels on random
+    /// tensors, on the committed blobs and on random blobs of architecture 1.
+    #[test]
+    fn fast_kernels_equal_the_reference() {
+        use crate::policy::builtin::{K1, K10};
+        let r = super::selftest::run(7, &[K1, K10], None).unwrap();
+        assert!(r.cases > 140, "{r:?}");
+        let blobs: Vec<Vec<u8>> = (0..4).map(random_blob).collect();
+        let views: Vec<&[u8]> = blobs.iter().map(|b| &b[..]).collect();
+        super::selftest::run(11, &views, None).unwrap();
     }
 
     #[test]

@@ -19,6 +19,7 @@
 //! The GeoJSON and DXF readers are `from_geojson` and `from_dxf`; this module validates and
 //! centres what they (and our JSON reader) return.
 
+mod admissible;
 mod from_dxf;
 mod from_geojson;
 
@@ -95,6 +96,67 @@ pub struct NamedPlan {
     pub name: String,
     /// The plan, centred on its perimeter centroid (the model frame).
     pub plan: FloorPlan,
+    /// Where the model frame lies in the file's own coordinates (what the answer is
+    /// printed in).
+    #[serde(default)]
+    pub frame: PlanFrame,
+}
+
+/// Where the model frame (metres, origin at the perimeter centroid) lies in a plan file's
+/// own coordinates: the shifts [`load_rooms`] applies, kept in f64 so that an answer can be
+/// given back in the file's units and axes (national-grid coordinates keep their
+/// millimetres). A plan point `p` (file units) is the model point
+/// `(p − bbox_centre)·scale − centroid`; [`PlanFrame::to_plan`] undoes it. The axes are the
+/// file's (no rotation, no mirroring), so headings are the same in both frames.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlanFrame {
+    /// Name of the file's length unit (`m`, `mm`, `cm`, or a DXF `$INSUNITS` unit such as
+    /// `ft`).
+    pub unit: String,
+    /// Metres per file unit.
+    pub scale: f64,
+    /// The bounding-box centre subtracted first, in file units (f64, before going to f32).
+    pub bbox_centre: [f64; 2],
+    /// The perimeter centroid of the shifted, scaled outline that
+    /// [`FloorPlan::centered`] then subtracted (m).
+    pub centroid: [f64; 2],
+}
+
+impl Default for PlanFrame {
+    /// The model frame itself (generated plans): metres, no shift.
+    fn default() -> Self {
+        PlanFrame {
+            unit: "m".to_string(),
+            scale: 1.0,
+            bbox_centre: [0.0; 2],
+            centroid: [0.0; 2],
+        }
+    }
+}
+
+impl PlanFrame {
+    /// A model-frame point (m) in the file's coordinates (file units).
+    pub fn to_plan(&self, model: [f64; 2]) -> [f64; 2] {
+        let s = self.scale;
+        [
+            (model[0] + self.centroid[0]) / s + self.bbox_centre[0],
+            (model[1] + self.centroid[1]) / s + self.bbox_centre[1],
+        ]
+    }
+
+    /// A point in the file's coordinates (file units) in the model frame (m).
+    pub fn to_model(&self, plan: [f64; 2]) -> [f64; 2] {
+        let s = self.scale;
+        [
+            (plan[0] - self.bbox_centre[0]) * s - self.centroid[0],
+            (plan[1] - self.bbox_centre[1]) * s - self.centroid[1],
+        ]
+    }
+
+    /// A length in metres in file units.
+    pub fn length_to_plan(&self, metres: f64) -> f64 {
+        metres / self.scale
+    }
 }
 
 impl NamedPlan {
@@ -279,7 +341,7 @@ pub fn load_rooms(path: &Path, opts: &LoadOptions) -> Result<Vec<LoadedPlan>, Pl
     for (i, raw) in rooms.into_iter().enumerate() {
         let label = raw.name.clone().unwrap_or_else(|| format!("room {i}"));
         let room = many.then(|| label.clone());
-        let plan = validate(path, room.clone(), &raw.vertices, scale, unit_name)?;
+        let (plan, frame, remarks) = validate(path, room.clone(), &raw.vertices, scale, unit_name)?;
         let name = if many {
             format!(
                 "{stem}#{}",
@@ -290,8 +352,9 @@ pub fn load_rooms(path: &Path, opts: &LoadOptions) -> Result<Vec<LoadedPlan>, Pl
         };
         let mut warnings = raw.warnings;
         warnings.extend(notes.iter().cloned());
+        warnings.extend(remarks);
         out.push(LoadedPlan {
-            plan: NamedPlan { name, plan },
+            plan: NamedPlan { name, plan, frame },
             warnings,
         });
     }
@@ -380,15 +443,17 @@ pub fn load_plans_from(
     (good, bad)
 }
 
-/// Scales, de-duplicates the closing vertex, orients and validates one outline; errors
-/// name vertices by their index in the file (0-based) and their coordinates.
+/// Scales, de-duplicates the closing vertex, orients and validates one outline, and checks
+/// that the instrument can localize in it ([`admissible`]); returns the plan, where its
+/// model frame lies in the file's coordinates, and the admissibility warnings. Errors name
+/// vertices by their index in the file (0-based) and their coordinates.
 fn validate(
     path: &Path,
     room: Option<String>,
     vertices: &[[f64; 2]],
     scale: f64,
     unit_name: &str,
-) -> Result<FloorPlan, PlanFileError> {
+) -> Result<(FloorPlan, PlanFrame, Vec<String>), PlanFileError> {
     let e = |reason: String| err(path, room.clone(), reason);
     let mut v: Vec<[f64; 2]> = vertices.to_vec();
     if v.len() >= 2 && v.first() == v.last() {
@@ -452,8 +517,14 @@ fn validate(
         let (a, b) = (fv(k), order[(k as usize + 1) % n]);
         format!("edge {a}–{b} {} → {}", coords(a), coords(b))
     };
+    // The perimeter centroid `centered` subtracts, kept for the answer's frame.
+    let mut centroid = [0.0f64; 2];
     FloorPlan::new(&pts)
-        .map(|p| p.centered())
+        .map(|p| {
+            let c = p.perimeter_centroid();
+            centroid = [c.x as f64, c.y as f64];
+            p.centered()
+        })
         .map_err(|pe| {
             e(match pe {
                 PlanError::TooFewVertices | PlanError::TooManyVertices => pe.to_string(),
@@ -495,7 +566,14 @@ fn validate(
         })
         .and_then(|plan| {
             fits_pipeline(&plan).map_err(e)?;
-            Ok(plan)
+            let remarks = admissible::check(&plan).map_err(e)?;
+            let frame = PlanFrame {
+                unit: unit_name.to_string(),
+                scale,
+                bbox_centre: [cx, cy],
+                centroid,
+            };
+            Ok((plan, frame, remarks))
         })
 }
 
@@ -665,6 +743,46 @@ mod tests {
     }
 
     #[test]
+    fn the_frame_gives_back_national_grid_coordinates() {
+        // The L-room at E ≈ 2 600 123, N ≈ 1 200 456 (m), and in millimetres far out.
+        let d = dir("frame");
+        let (e0, n0) = (2_600_123.0, 1_200_456.0);
+        let grid: Vec<[f64; 2]> = L_ROOM.iter().map(|p| [p[0] + e0, p[1] + n0]).collect();
+        let json = d.join("grid.json");
+        std::fs::write(&json, serde_json::json!({ "vertices": grid }).to_string()).unwrap();
+        let named = load_plan(&json, &LoadOptions::default()).unwrap().plan;
+        assert_eq!((named.frame.unit.as_str(), named.frame.scale), ("m", 1.0));
+        // Every model vertex maps back onto its file vertex to well under a millimetre.
+        for k in 0..named.plan.len() {
+            let m = named.plan.vertex(k);
+            let p = named.frame.to_plan([m.x as f64, m.y as f64]);
+            let near = grid
+                .iter()
+                .map(|g| ((g[0] - p[0]).powi(2) + (g[1] - p[1]).powi(2)).sqrt())
+                .fold(f64::MAX, f64::min);
+            assert!(near < 1e-4, "vertex {k}: {p:?}");
+            let back = named.frame.to_model(p);
+            assert!((back[0] - m.x as f64).abs() < 1e-9 && (back[1] - m.y as f64).abs() < 1e-9);
+        }
+        let mm: Vec<[f64; 2]> = grid
+            .iter()
+            .map(|p| [p[0] * 1000.0, p[1] * 1000.0])
+            .collect();
+        let dxf = d.join("grid-mm.dxf");
+        std::fs::write(&dxf, dxf_text(&[("walls", &mm, true)], Some(4))).unwrap();
+        let named = load_plan(&dxf, &LoadOptions::default()).unwrap().plan;
+        assert_eq!(named.frame.unit, "mm");
+        let m = named.plan.vertex(0);
+        let p = named.frame.to_plan([m.x as f64, m.y as f64]);
+        let near = mm
+            .iter()
+            .map(|g| ((g[0] - p[0]).powi(2) + (g[1] - p[1]).powi(2)).sqrt())
+            .fold(f64::MAX, f64::min);
+        assert!(near < 0.1, "{p:?} (mm)");
+        assert!((named.frame.length_to_plan(0.001) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
     fn errors_name_file_and_vertex() {
         let d = dir("err");
         let opts = LoadOptions::default();
@@ -776,12 +894,14 @@ mod tests {
         let p = NamedPlan {
             name: "office.json".into(),
             plan: expected(),
+            frame: PlanFrame::default(),
         };
         assert_eq!(
             p.seed(),
             NamedPlan {
                 name: "office.json".into(),
-                plan: expected()
+                plan: expected(),
+                frame: PlanFrame::default(),
             }
             .seed()
         );
@@ -789,7 +909,8 @@ mod tests {
             p.seed(),
             NamedPlan {
                 name: "office2.json".into(),
-                plan: expected()
+                plan: expected(),
+                frame: PlanFrame::default(),
             }
             .seed()
         );

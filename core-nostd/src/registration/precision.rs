@@ -1,0 +1,289 @@
+//! The precision of a registered pose: the covariance of the AgentPose `(x, y, θ)` from the
+//! information matrix of the readings the pose explains (issue 20). What a surveyor reads
+//! as "± so many millimetres" next to the station's coordinates.
+//!
+//! At `pose`, reading `i` (encoder bearing `βᵢ`, model direction `dᵢ = R(h)·unit(βᵢ)`) hits
+//! the wall with outward normal `nᵢ` at the predicted range `ρᵢ`, the root of
+//! `nᵢ·(a + ρ·dᵢ) = const`. Its derivatives, with `cᵢ = nᵢ·dᵢ` (the cosine of the incidence)
+//! and `⊥d = (−d_y, d_x)`, are `∂ρ/∂a = −nᵢ/cᵢ` and `∂ρ/∂h = −ρᵢ·(nᵢ·⊥dᵢ)/cᵢ`. With range
+//! noise σ the information is `I = Σ JᵢᵀJᵢ / σ²` and the covariance of the least-squares pose
+//! is `I⁻¹` (the heading row and column are left out, and zero, when it is known). Only the
+//! readings the pose explains (range residual within the gate) count: an outlier the fit
+//! left out carries no information about where the instrument stands.
+//!
+//! A fit with fewer explained readings than unknowns, or whose readings leave one
+//! direction free (a fan onto one wall: the information matrix is singular), has no
+//! precision: [`PrecisionError`] says which, and the caller must print that instead of a
+//! number. Nothing here panics or allocates.
+
+use super::*;
+
+/// The covariance of a registered AgentPose.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseCovariance {
+    /// Covariance of `(x, y, θ)` in the model frame (m², m·rad, rad²); with a known heading
+    /// the third row and column are zero.
+    pub cov: [[f32; 3]; 3],
+    /// Readings the precision rests on (explained by the pose).
+    pub used: u16,
+    /// Readings left out (no wall on their ray at the pose, or residual beyond the gate).
+    pub left_out: u16,
+    /// Unknowns of the pose (2 with the heading known, 3 without).
+    pub unknowns: u8,
+}
+
+impl PoseCovariance {
+    /// Standard deviation of `x` (m).
+    pub fn sigma_x(&self) -> f32 {
+        sqrt(self.cov[0][0].max(0.0))
+    }
+    /// Standard deviation of `y` (m).
+    pub fn sigma_y(&self) -> f32 {
+        sqrt(self.cov[1][1].max(0.0))
+    }
+    /// Standard deviation of the heading (rad; 0 when it is known).
+    pub fn sigma_heading(&self) -> f32 {
+        sqrt(self.cov[2][2].max(0.0))
+    }
+    /// True when no reading is redundant (as many as unknowns): the precision then comes
+    /// from the sensor model alone, nothing checked the fit.
+    pub fn exactly_determined(&self) -> bool {
+        self.used as usize <= self.unknowns as usize
+    }
+}
+
+/// Why a pose has no precision.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PrecisionError {
+    /// Fewer explained readings than unknowns.
+    Underdetermined {
+        /// Readings the pose explains.
+        readings: u16,
+        /// Unknowns of the pose.
+        unknowns: u8,
+    },
+    /// Enough readings, but they leave a direction of the pose free (singular
+    /// information matrix, e.g. every ray onto one wall).
+    Singular {
+        /// Readings the pose explains.
+        readings: u16,
+    },
+    /// The pose or a parameter is not finite or not positive.
+    InvalidInput,
+}
+
+impl core::fmt::Display for PrecisionError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            PrecisionError::Underdetermined { readings, unknowns } => write!(
+                f,
+                "underdetermined: {readings} explained reading(s) for {unknowns} unknowns"
+            ),
+            PrecisionError::Singular { readings } => write!(
+                f,
+                "underdetermined: the {readings} readings leave a direction of the pose free"
+            ),
+            PrecisionError::InvalidInput => write!(f, "pose or noise not finite"),
+        }
+    }
+}
+
+/// Relative determinant below which the information matrix counts as singular
+/// (`det / Π diagonal`, scale-free: 1 for independent directions, 0 for a free one).
+pub const SINGULAR_RATIO: f64 = 1e-6;
+
+/// Smallest incidence cosine used in the Jacobian (a grazing ray: ≈ 87°), so that a ray
+/// nearly parallel to its wall cannot blow the matrix up.
+const MIN_COS_INCIDENCE: f32 = 0.05;
+
+/// [`PoseCovariance`] of `pose` from the readings of `obs` it explains: range residual
+/// (measured minus ray-cast) within `gate` metres. `sigma` is the range noise (m).
+pub fn pose_covariance(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    fixed_heading: bool,
+    sigma: f32,
+    gate: f32,
+) -> Result<PoseCovariance, PrecisionError> {
+    if !(pose.x.is_finite() && pose.y.is_finite() && pose.theta.is_finite())
+        || !(sigma.is_finite() && sigma > 0.0 && gate.is_finite() && gate > 0.0)
+    {
+        return Err(PrecisionError::InvalidInput);
+    }
+    let a = pose.translation();
+    let unknowns: u8 = if fixed_heading { 2 } else { 3 };
+    let mut info = [[0.0f64; 3]; 3];
+    let (mut used, mut left_out) = (0u16, 0u16);
+    for p in obs.pts.iter() {
+        let d = rotate(p.d, pose.theta);
+        let Some(hit) = plan.ray_cast(a, d) else {
+            left_out += 1;
+            continue;
+        };
+        if abs(length(p.s) - hit.range) > gate {
+            left_out += 1;
+            continue;
+        }
+        let n = plan.outward_normal(hit.wall);
+        let c = abs(n.x * d.x + n.y * d.y).max(MIN_COS_INCIDENCE) as f64;
+        let perp = n.x * -d.y + n.y * d.x;
+        let j = [
+            -(n.x as f64) / c,
+            -(n.y as f64) / c,
+            -(hit.range as f64) * perp as f64 / c,
+        ];
+        for (u, ju) in j.iter().enumerate() {
+            for (v, jv) in j.iter().enumerate() {
+                info[u][v] += ju * jv;
+            }
+        }
+        used += 1;
+    }
+    if (used as usize) < unknowns as usize {
+        return Err(PrecisionError::Underdetermined {
+            readings: used,
+            unknowns,
+        });
+    }
+    let s2 = (sigma as f64) * (sigma as f64);
+    let mut cov = [[0.0f32; 3]; 3];
+    if fixed_heading {
+        let (p, q, r) = (info[0][0], info[0][1], info[1][1]);
+        let det = p * r - q * q;
+        if det.is_nan() || det <= SINGULAR_RATIO * p * r {
+            return Err(PrecisionError::Singular { readings: used });
+        }
+        cov[0][0] = (s2 * r / det) as f32;
+        cov[0][1] = (-s2 * q / det) as f32;
+        cov[1][0] = cov[0][1];
+        cov[1][1] = (s2 * p / det) as f32;
+    } else {
+        let m = &info;
+        let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
+        let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
+        let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
+        let det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
+        if det.is_nan() || det <= SINGULAR_RATIO * m[0][0] * m[1][1] * m[2][2] {
+            return Err(PrecisionError::Singular { readings: used });
+        }
+        let adj = [
+            [
+                c00,
+                m[0][2] * m[2][1] - m[0][1] * m[2][2],
+                m[0][1] * m[1][2] - m[0][2] * m[1][1],
+            ],
+            [
+                c01,
+                m[0][0] * m[2][2] - m[0][2] * m[2][0],
+                m[0][2] * m[1][0] - m[0][0] * m[1][2],
+            ],
+            [
+                c02,
+                m[0][1] * m[2][0] - m[0][0] * m[2][1],
+                m[0][0] * m[1][1] - m[0][1] * m[1][0],
+            ],
+        ];
+        for (row, arow) in cov.iter_mut().zip(adj.iter()) {
+            for (c, v) in row.iter_mut().zip(arow.iter()) {
+                *c = (s2 * v / det) as f32;
+            }
+        }
+    }
+    Ok(PoseCovariance {
+        cov,
+        used,
+        left_out,
+        unknowns,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::floorplan::MAX_VERTICES;
+    use core::f32::consts::{FRAC_PI_2, PI};
+
+    fn rect(w: f32, h: f32) -> FloorPlan {
+        let v: HVec<Vec2, MAX_VERTICES> = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)]
+            .iter()
+            .map(|&(x, y)| v2(x - 0.5 * w, y - 0.5 * h))
+            .collect();
+        FloorPlan::new(&v).unwrap()
+    }
+
+    fn obs_at(plan: &FloorPlan, pose: &Pose2, bearings: &[f32]) -> Observations {
+        let mut o = Observations::new();
+        for &b in bearings {
+            let hit = plan
+                .ray_cast(pose.translation(), rotate(unit(b), pose.theta))
+                .unwrap();
+            o.push(Measurement::new(b, hit.range)).unwrap();
+        }
+        o
+    }
+
+    #[test]
+    fn perpendicular_walls_give_sigma_per_axis() {
+        // Heading known, one reading onto the east wall, one onto the north wall, both
+        // head-on: each fixes one coordinate to the range noise.
+        let plan = rect(12.0, 8.0);
+        let pose = Pose2::new(1.0, -1.0, 0.0);
+        let o = obs_at(&plan, &pose, &[0.0, FRAC_PI_2]);
+        let c = pose_covariance(&plan, &o, &pose, true, 0.01, 0.1).unwrap();
+        assert!((c.sigma_x() - 0.01).abs() < 1e-5, "{c:?}");
+        assert!((c.sigma_y() - 0.01).abs() < 1e-5, "{c:?}");
+        assert_eq!(c.sigma_heading(), 0.0);
+        assert!(c.exactly_determined());
+        // Four readings, two per axis: σ / √2.
+        let o = obs_at(&plan, &pose, &[0.0, FRAC_PI_2, PI, -FRAC_PI_2]);
+        let c = pose_covariance(&plan, &o, &pose, true, 0.01, 0.1).unwrap();
+        assert!((c.sigma_x() - 0.01 / 2f32.sqrt()).abs() < 1e-4, "{c:?}");
+        assert!(!c.exactly_determined());
+    }
+
+    #[test]
+    fn too_few_or_parallel_readings_have_no_precision() {
+        let plan = rect(12.0, 8.0);
+        let pose = Pose2::new(1.0, -1.0, 0.3);
+        let o = obs_at(&plan, &pose, &[0.0, 1.6]);
+        assert_eq!(
+            pose_covariance(&plan, &o, &pose, false, 0.01, 0.1),
+            Err(PrecisionError::Underdetermined {
+                readings: 2,
+                unknowns: 3
+            })
+        );
+        // A fan onto the east wall only, heading known: the position along the wall is free.
+        let pose = Pose2::new(1.0, -1.0, 0.0);
+        let o = obs_at(&plan, &pose, &[0.0, 0.05, -0.05]);
+        assert!(matches!(
+            pose_covariance(&plan, &o, &pose, true, 0.01, 0.1),
+            Err(PrecisionError::Singular { .. })
+        ));
+        // An outlier is left out, not used.
+        let mut o = obs_at(&plan, &pose, &[0.0, FRAC_PI_2, 3.0]);
+        o.push(Measurement::new(-FRAC_PI_2, 0.5)).unwrap();
+        let c = pose_covariance(&plan, &o, &pose, true, 0.01, 0.1).unwrap();
+        assert_eq!((c.used, c.left_out), (3, 1));
+        // NaN never panics.
+        let bad = Pose2::new(f32::NAN, 0.0, 0.0);
+        assert_eq!(
+            pose_covariance(&plan, &o, &bad, true, 0.01, 0.1),
+            Err(PrecisionError::InvalidInput)
+        );
+    }
+
+    #[test]
+    fn heading_unknown_readings_on_every_wall_determine_every_axis() {
+        let plan = rect(12.0, 8.0);
+        let pose = Pose2::new(0.5, 0.5, 0.4);
+        let o = obs_at(&plan, &pose, &[0.0, 1.2, 2.4, 3.6, 4.8]);
+        let c = pose_covariance(&plan, &o, &pose, false, 0.01, 0.1).unwrap();
+        assert_eq!(c.unknowns, 3);
+        assert!(c.sigma_heading() > 0.0 && c.sigma_heading() < 0.01, "{c:?}");
+        assert!(c.sigma_x() > 0.003 && c.sigma_x() < 0.05, "{c:?}");
+        // Symmetric.
+        assert!((c.cov[0][2] - c.cov[2][0]).abs() < 1e-9);
+    }
+}
