@@ -105,6 +105,7 @@ pub const STEPS: &[Step] = &[
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-oracle.md"), ..cli("mcu-bench", "results/mcu-bench", &["mcu-bench", "--episodes", "20"], 120) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-oracle.md"), ..cli("mcu-bench-int8", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8"], 30) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-confident.md"), ..cli("mcu-bench-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--termination", "confident"], 160) },
+    Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-confident.md"), ..cli("mcu-bench-int8-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8", "--termination", "confident"], 40) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/size.md"), ..cli("size", "results", &["size"], 120) },
 ];
 

@@ -643,3 +643,60 @@ fn fine_argmax_is_incremental_and_exact() {
     }
     assert!(compared > 100, "{compared}");
 }
+
+/// `grid::mass_near` visits only the rows near its centres; it must add the same cells in
+/// the same order as the pass over every cell it replaced (bit for bit), with and without
+/// symmetric equivalents, centres on the grid's edges and bins wrapping around.
+#[test]
+fn mass_near_equals_the_pass_over_every_cell() {
+    use crate::localization::grid::{mass_near, CellIndex, GridSpec};
+    let reference =
+        |grid: &GridSpec, n: usize, centre: CellIndex, order: u8, prob: &dyn Fn(usize) -> f32| {
+            let k = order.max(1);
+            let mut centres: heapless::Vec<CellIndex, 16> = heapless::Vec::new();
+            for j in 0..k.min(16) {
+                if let Some(c) = grid.equivalent_cell(centre, j, k) {
+                    if !centres.contains(&c) {
+                        let _ = centres.push(c);
+                    }
+                }
+            }
+            let mut m = 0.0;
+            for i in 0..n {
+                let c = grid.cell_at(i);
+                if centres.iter().any(|&k| grid.near(k, c, 1)) {
+                    m += prob(i);
+                }
+            }
+            m
+        };
+    let mut rng = Pcg32::new(7, 11);
+    for rot_bins in [1u8, 2, 3, 10] {
+        let grid = GridSpec {
+            nx: 13,
+            ny: 9,
+            rot_bins,
+            origin: [-6.5, -4.5],
+            cell: [1.0, 1.0],
+            known_heading: 0.0,
+        };
+        let n = grid.len();
+        let weights: std::vec::Vec<f32> = (0..n).map(|_| uniform(&mut rng) * 1e-2).collect();
+        let prob = |i: usize| weights[i];
+        for trial in 0..200 {
+            let centre = CellIndex {
+                ix: (rng.next_u32() % 13) as u8,
+                iy: (rng.next_u32() % 9) as u8,
+                bin: (rng.next_u32() % rot_bins as u32) as u8,
+            };
+            let order = [1u8, 2, 4][trial % 3];
+            let fast = mass_near(&grid, n, centre, order, prob);
+            let slow = reference(&grid, n, centre, order, &prob);
+            assert_eq!(
+                fast.to_bits(),
+                slow.to_bits(),
+                "{centre:?} order {order} K {rot_bins}"
+            );
+        }
+    }
+}
