@@ -764,7 +764,13 @@ impl GhtLocalizer {
     }
 
     fn normaliser(&self) -> f32 {
-        (0..self.grid.len()).map(|i| self.q(i)).sum()
+        // In flat-index order without the division per cell of `level` (bit-identical to
+        // the sum of `q(i)`; issue 22: this runs after every reading).
+        let mut z = 0.0;
+        self.for_each_level(|_, level| {
+            z += level.map_or(0.0, |m| self.q_of_level(m));
+        });
+        z
     }
 
     /// Normalised probability of flat cell `i` (`i < grid().len()`).
@@ -781,13 +787,11 @@ impl GhtLocalizer {
     /// uniform over the interior cells: `ln(interior cells × K)`.
     pub fn entropy(&self) -> f32 {
         let mut acc = EntropyAcc::new(self.cfg.evidence_gain);
-        let l = self.grid.layer_len();
-        for i in 0..self.grid.len() {
-            if self.interior[i % l] {
-                let m = self.level(i);
+        self.for_each_level(|_, level| {
+            if let Some(m) = level {
                 acc.add(&self.qtab, (self.amax - m) as u16, m as u32 + self.base);
             }
-        }
+        });
         acc.entropy(self.uniform_entropy())
     }
 
@@ -826,13 +830,14 @@ impl GhtLocalizer {
         }
         let mut best = 0;
         let mut bv = 0u8;
-        for i in 0..self.grid.len() {
-            let v = self.level(i);
+        // Cells outside the room hold no votes (level 0), and only a level above 0 wins.
+        self.for_each_level(|i, level| {
+            let v = level.unwrap_or(0);
             if v > bv {
                 bv = v;
                 best = i;
             }
-        }
+        });
         Some(self.grid.cell_at(best))
     }
 
