@@ -1,10 +1,11 @@
-//! The screened refinement (issue 22, `Search::Screened`, what the pipeline runs) measured
-//! against the exhaustive one it replaced (`Search::Exhaustive`) on recorded episodes:
-//! heuristic-1 run to the action limit on the first test plans, K = 1 and K = 10, both
-//! refinements after every reading from the registration's minimum on. The screened search
-//! registers a fraction of the hypotheses; it must answer with the same cell nearly
-//! always, be right (coarse success of that cell) as often, and leave the pose as close to
-//! the truth.
+//! The screened refinement (issue 22, `Search::Screened`) and the one the pipeline keeps
+//! after every reading past the stop gate (`Budget::per_reading`: at K = 10 carried from
+//! the previous reading, `refine_after`) measured against the exhaustive one they replaced
+//! (`Search::Exhaustive`) on recorded episodes: heuristic-1 run to the action limit on the
+//! first test plans, K = 1 and K = 10, every refinement after every reading from the
+//! registration's minimum on. They register a fraction of the hypotheses; each must answer
+//! with the same cell nearly always, be right (coarse success of that cell) as often, and
+//! leave the pose as close to the truth.
 
 use activesense_core::episode::{AgentKind, Termination};
 use activesense_core::policy::BaselineAgent;
@@ -16,9 +17,14 @@ use activesense_sim::world::plans::TEST_SEEDS;
 struct Tally {
     points: u32,
     same_cell: u32,
-    right: [u32; 2],
-    error: [f64; 2],
+    same_cell_kept: u32,
+    right: [u32; 3],
+    error: [f64; 3],
+    /// The exhaustive search's errors at the points the pipeline kept a refinement.
+    error_exhaustive_at_kept: f64,
+    right_exhaustive_at_kept: u32,
     hypotheses: [u64; 2],
+    kept_points: u32,
 }
 
 fn tally(rot_bins: u8, plans: u32, max_actions: u16) -> Tally {
@@ -40,6 +46,7 @@ fn tally(rot_bins: u8, plans: u32, max_actions: u16) -> Tally {
             let input = pipe.refine_input(v.plan);
             let grid = pipe.localizer().grid();
             let mut cells = [None; 2];
+            let mut exhaustive = (0.0, false);
             for (k, search) in [Search::Exhaustive, Search::Screened]
                 .into_iter()
                 .enumerate()
@@ -49,21 +56,42 @@ fn tally(rot_bins: u8, plans: u32, max_actions: u16) -> Tally {
                 };
                 let pose = r.registration.pose;
                 // Capped at 1 m: a wrong mode counts once, not by how far away it is.
-                t.error[k] += ((pose.translation() - v.truth.translation()).norm() as f64).min(1.0);
+                let err = ((pose.translation() - v.truth.translation()).norm() as f64).min(1.0);
+                t.error[k] += err;
                 t.hypotheses[k] += r.hypotheses as u64;
                 cells[k] = grid.cell_of_pose(&pose);
-                t.right[k] += cells[k]
-                    .is_some_and(|c| grid.coarse_success(c, v.truth, pipe.symmetry_order()))
-                    as u32;
+                let right = cells[k]
+                    .is_some_and(|c| grid.coarse_success(c, v.truth, pipe.symmetry_order()));
+                t.right[k] += right as u32;
+                if k == 0 {
+                    exhaustive = (err, right);
+                }
             }
             t.points += 1;
             t.same_cell += (cells[0] == cells[1]) as u32;
+            // The pipeline's own (kept) refinement of the same readings, past the stop gate.
+            if pipe.stop_features().is_some() {
+                if let Ok(r) = pipe.refine(v.plan) {
+                    let pose = r.registration.pose;
+                    t.error[2] +=
+                        ((pose.translation() - v.truth.translation()).norm() as f64).min(1.0);
+                    let cell = grid.cell_of_pose(&pose);
+                    t.right[2] += cell
+                        .is_some_and(|c| grid.coarse_success(c, v.truth, pipe.symmetry_order()))
+                        as u32;
+                    t.kept_points += 1;
+                    t.same_cell_kept += (cell == cells[0]) as u32;
+                    t.error_exhaustive_at_kept += exhaustive.0;
+                    t.right_exhaustive_at_kept += exhaustive.1 as u32;
+                }
+            }
         });
     }
     t
 }
 
 fn check(t: &Tally) {
+    println!("{t:?}");
     let n = t.points as f64;
     assert!(t.points > 40, "{t:?}");
     assert!(t.same_cell as f64 >= 0.9 * n, "same answer cell: {t:?}");
@@ -79,14 +107,33 @@ fn check(t: &Tally) {
         (t.hypotheses[1] as f64) <= 0.5 * t.hypotheses[0] as f64,
         "registrations: {t:?}"
     );
+    // The pipeline's kept refinement against the exhaustive one at the same points. Measured
+    // (40 plans): K = 1, 29 points... see the test names' tallies with `--nocapture`; at
+    // K = 10 the carried re-fit answered the same cell at all 29 points, right as often,
+    // with the capped error summed 5.96 m against the exhaustive 5.19 m (+15 %, mid-episode
+    // poses; the confident table's answers stay within their intervals, docs/EVALUATION.md).
+    let k = t.kept_points as f64;
+    assert!(t.kept_points > 20, "{t:?}");
+    assert!(
+        t.same_cell_kept as f64 >= 0.9 * k,
+        "kept: same answer cell: {t:?}"
+    );
+    assert!(
+        t.right[2] as f64 >= t.right_exhaustive_at_kept as f64 - 0.02 * k,
+        "kept: right cells: {t:?}"
+    );
+    assert!(
+        t.error[2] <= t.error_exhaustive_at_kept * 1.2 + 0.005 * k,
+        "kept: mean capped pose error: {t:?}"
+    );
 }
 
 #[test]
 fn screened_refinement_matches_the_exhaustive_one_at_k1() {
-    check(&tally(1, 12, 30));
+    check(&tally(1, 40, 30));
 }
 
 #[test]
 fn screened_refinement_matches_the_exhaustive_one_at_k10() {
-    check(&tally(10, 12, 40));
+    check(&tally(10, 40, 40));
 }

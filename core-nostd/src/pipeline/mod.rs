@@ -278,9 +278,10 @@ impl Pipeline {
             .filter(|((n, _), _)| n + 1 == self.observations.len())
             .map(|(_, r)| r);
         let input = self.refine_input(&self.plan);
-        let refined = match previous {
+        let budget = Budget::per_reading(self.params.heading_known());
+        let refined = match previous.filter(|_| budget.carry) {
             Some(p) => refine::refine_after(&input, &p),
-            None => refine::refine(&input),
+            None => refine::refine_within(&input, &budget),
         };
         self.last_refinement = refined.ok().map(|r| (key, r));
     }
@@ -532,11 +533,11 @@ impl Pipeline {
     }
 
     /// The multi-hypothesis refinement ([`crate::registration::refine`]) of the readings so far,
-    /// as the stop sees it ([`Budget::SCREENED`], what the calibration was fitted on).
+    /// as the stop sees it ([`Budget::per_reading`], what the calibration was fitted on).
     /// Deterministic: the confident rule's kept result is returned when the readings have
     /// not changed since.
     pub fn refine(&self, plan: &FloorPlan) -> Result<Refinement, RegistrationError> {
-        self.refine_within(plan, &Budget::SCREENED)
+        self.refine_within(plan, &Budget::per_reading(self.params.heading_known()))
     }
 
     /// The refinement the episode ends with when none is kept (the oracle stop, or a
