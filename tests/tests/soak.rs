@@ -4,6 +4,13 @@
 //! host's in-process run and the host's own agent (`check_episodes_with`); the link's
 //! timeouts turn a hang into a failure. `ACTIVESENSE_SOAK_EPISODES` sets the count (default
 //! 8, one of each combination, which CI runs); `cargo xtask soak --episodes N` runs it long.
+//!
+//! Watched every 8 episodes, from the device's own `Status` and the host's link counters:
+//! the device's completed-episode count must follow the host's one for one, its bad frames,
+//! sequence errors, re-sent replies and abandoned episodes must stay 0, as must the host's
+//! re-sent requests, dropped replies and reply time-outs on this clean line. The device's
+//! largest update (cycles since power-on) is reported, not asserted: it depends on the
+//! plans. Not watched: the stack's high-water mark, which the firmware does not measure.
 
 use activesense_core::episode::AgentKind;
 use activesense_sim::episode::EpisodeSpec;
@@ -21,6 +28,7 @@ fn qemu_soak_episodes_bit_identical() {
     let elf = firmware_elf();
     let mut l = serial::open(&LinkSpec::Qemu(elf), Duration::from_secs(10)).expect("start qemu");
     let info = l.client.hello().expect("hello");
+    let before = l.client.status().expect("status");
     let started = Instant::now();
     let mut steps = 0usize;
     for j in 0..n {
@@ -44,10 +52,49 @@ fn qemu_soak_episodes_bit_identical() {
             }
         });
         if (j + 1) % 8 == 0 || j + 1 == n {
+            let st = l.client.status().expect("status during the soak");
+            let link = st.link;
+            let host = l.client.counters();
             println!(
-                "soak: {} episodes bit-identical, {steps} steps, {:.1} s",
+                "soak: {} episodes bit-identical, {steps} steps, {:.1} s; device: {} episodes, \
+                 {} frames ok, {} bad, {} sequence errors, {} replies re-sent, {} abandoned, \
+                 largest update {} cycles over {} updates; host: {}",
                 j + 1,
-                started.elapsed().as_secs_f64()
+                started.elapsed().as_secs_f64(),
+                link.episodes - before.link.episodes,
+                link.frames_ok - before.link.frames_ok,
+                link.frames_bad,
+                link.sequence_errors,
+                link.retransmissions,
+                link.timeouts,
+                st.cycles.max_cycles,
+                st.cycles.updates,
+                host.summary()
+            );
+            assert_eq!(
+                link.episodes - before.link.episodes,
+                j + 1,
+                "device episode count"
+            );
+            assert_eq!(
+                (
+                    link.frames_bad,
+                    link.sequence_errors,
+                    link.retransmissions,
+                    link.timeouts
+                ),
+                (
+                    before.link.frames_bad,
+                    before.link.sequence_errors,
+                    before.link.retransmissions,
+                    before.link.timeouts
+                ),
+                "device link counters grew on a clean line"
+            );
+            assert_eq!(
+                host,
+                Default::default(),
+                "host link counters on a clean line"
             );
         }
     }
