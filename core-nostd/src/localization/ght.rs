@@ -703,13 +703,29 @@ impl GhtLocalizer {
     /// for `x, y < max_side` (the int8 policy's padded belief layout). The values of
     /// [`GhtLocalizer::for_each_level`], row by row with no call per cell: at K = 10 this is
     /// 9 000 cells every policy decision on the instrument.
-    pub fn write_levels_interleaved<T: Copy>(
+    pub fn write_levels_interleaved<T: Copy + PartialEq>(
         &self,
         out: &mut [T],
         side: usize,
         max_side: usize,
         table: &[T; 256],
         outside: T,
+    ) {
+        self.write_levels_interleaved_with(out, side, max_side, table, outside, max_u8x4)
+    }
+
+    /// [`GhtLocalizer::write_levels_interleaved`] with the per-byte maximum of two words
+    /// supplied by the caller (`max4(a, b)`: each byte the larger of `a`'s and `b`'s; the
+    /// int8 policy passes its DSP kernel on the M4). Any correct `max4` gives the same
+    /// output.
+    pub fn write_levels_interleaved_with<T: Copy + PartialEq>(
+        &self,
+        out: &mut [T],
+        side: usize,
+        max_side: usize,
+        table: &[T; 256],
+        outside: T,
+        max4: impl Fn(u32, u32) -> u32,
     ) {
         let l = self.grid.layer_len();
         if l == 0 || l > MAX_LAYER_CELLS {
@@ -725,6 +741,7 @@ impl GhtLocalizer {
             return;
         }
         let interior = &self.interior[..l];
+        let zero_is_outside = table[0] == outside;
         for (bin, bin_acc) in self
             .acc
             .chunks_exact(TRACKED_SUB_BINS * l)
@@ -747,9 +764,42 @@ impl GhtLocalizer {
                 let Some(dst) = out.get_mut(start..start + (w - 1) * k + 1) else {
                     return;
                 };
+                // Four cells at a time: their four heading slots read as words and reduced
+                // with `max4` (the caller's per-byte maximum: two DSP instructions on the
+                // M4, [`crate::policy::int8::dot::Dot::max_u8x4`]), then one look-up and
+                // one strided store per cell.
+                let quads = w / 4;
+                let word = |c: &[u8]| u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+                let rows = r0
+                    .chunks_exact(4)
+                    .zip(r1.chunks_exact(4))
+                    .zip(r2.chunks_exact(4))
+                    .zip(r3.chunks_exact(4))
+                    .zip(inside.chunks_exact(4))
+                    .zip(dst.chunks_mut(4 * k));
+                for (((((c0, c1), c2), c3), ins), d) in rows {
+                    let m = max4(max4(word(c0), word(c1)), max4(word(c2), word(c3)));
+                    // A cell outside the room never holds a vote (level 0), so where level 0
+                    // maps to `outside` anyway the test per cell is not needed.
+                    let pick = |j: usize| {
+                        let v = table[(m >> (8 * j)) as u8 as usize];
+                        if zero_is_outside || ins[j] {
+                            v
+                        } else {
+                            outside
+                        }
+                    };
+                    // The last quad's chunk may end right after its fourth cell.
+                    if d.len() > 3 * k {
+                        d[0] = pick(0);
+                        d[k] = pick(1);
+                        d[2 * k] = pick(2);
+                        d[3 * k] = pick(3);
+                    }
+                }
                 // Plain indices (the row slices are `w` long, so only the strided store is
                 // checked): an iterator chain with `step_by` cost twice the instructions.
-                for x in 0..w {
+                for x in 4 * quads..w {
                     let v = if inside[x] {
                         table[r0[x].max(r1[x]).max(r2[x]).max(r3[x]) as usize]
                     } else {
@@ -889,6 +939,14 @@ impl GhtLocalizer {
             && self.peak_mass(symmetry_order) >= crit.min_peak_mass
             && self.entropy() <= crit.max_entropy
     }
+}
+
+/// Each byte of the result the larger of the corresponding bytes of `a` and `b`.
+#[inline]
+pub fn max_u8x4(a: u32, b: u32) -> u32 {
+    u32::from_le_bytes(core::array::from_fn(|j| {
+        ((a >> (8 * j)) as u8).max((b >> (8 * j)) as u8)
+    }))
 }
 
 impl Default for GhtLocalizer {

@@ -700,3 +700,38 @@ fn mass_near_equals_the_pass_over_every_cell() {
         }
     }
 }
+
+/// The interleaved belief writer (four cells per step, a caller's per-byte maximum, no
+/// interior test where level 0 maps to the outside value) against the cell-by-cell values
+/// of `for_each_level`, with a table whose level 0 differs from the outside value and one
+/// where it does not.
+#[test]
+fn interleaved_levels_equal_for_each_level() {
+    use crate::localization::ght::max_u8x4;
+    let p = odd_room();
+    let cfg = LocalizerConfig::default();
+    let mut l = boxed(&p, &cfg);
+    feed(&mut l, &p, &Pose2::new(0.7, -0.4, 0.9), 6);
+    let grid = *l.grid();
+    let (nx, k) = (grid.nx as usize, grid.rot_bins as usize);
+    let (max_side, side) = (nx.max(grid.ny as usize) - 1, nx.max(grid.ny as usize) + 1);
+    for zero_differs in [true, false] {
+        let table: [u16; 256] = core::array::from_fn(|m| 1000 + m as u16);
+        let outside = if zero_differs { 7 } else { table[0] };
+        let mut out = std::vec![0u16; side * side * k];
+        l.write_levels_interleaved_with(&mut out, side, max_side, &table, outside, max_u8x4);
+        let mut expected = std::vec![0u16; side * side * k];
+        l.for_each_level(|i, level| {
+            let (bin, cell) = (i / grid.layer_len(), i % grid.layer_len());
+            let (x, y) = (cell % nx, cell / nx);
+            if x < max_side && y < max_side {
+                expected[((y + 1) * side + x + 1) * k + bin] =
+                    level.map_or(outside, |m| table[m as usize]);
+            }
+        });
+        assert_eq!(
+            out, expected,
+            "level 0 differs from outside: {zero_differs}"
+        );
+    }
+}

@@ -191,7 +191,14 @@ impl PolicyInput<'_> {
         }
         let p = crate::policy::int8::QuantParams { scale, zero_point };
         let (table, outside) = self.level_table(|v| crate::policy::int8::quantize_value(v, p));
-        loc.write_levels_interleaved(out, side, BELIEF_SIDE, &table, outside);
+        loc.write_levels_interleaved_with(
+            out,
+            side,
+            BELIEF_SIDE,
+            &table,
+            outside,
+            <crate::policy::int8::dot::Fast as crate::policy::int8::dot::Dot>::max_u8x4,
+        );
         self.belief_len()
     }
 

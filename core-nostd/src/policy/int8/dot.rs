@@ -21,6 +21,12 @@ pub trait Dot {
     fn conv4(x: &[i8], row: usize, seg: usize, w: &[u32], acc: &mut [i32; 4]);
     /// `[Σ (x + off)·w0, Σ (x + off)·w1]` over int8 `x`, `w0`, `w1`.
     fn fc2(x: &[i8], off: i32, w0: &[u8], w1: &[u8]) -> [i32; 2];
+    /// Each byte the larger of `a`'s and `b`'s: the belief map's maximum over a cell's
+    /// heading slots, four cells at a time
+    /// ([`crate::localization::GhtLocalizer::write_levels_interleaved_with`]).
+    fn max_u8x4(a: u32, b: u32) -> u32 {
+        crate::localization::ght::max_u8x4(a, b)
+    }
 }
 
 /// Plain Rust: the reference for `Dsp`, and what every target but the M4 runs.

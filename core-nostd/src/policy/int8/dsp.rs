@@ -100,6 +100,25 @@ impl Dot for Dsp {
         *acc = [a0, a1, a2, a3];
     }
 
+    #[inline]
+    fn max_u8x4(a: u32, b: u32) -> u32 {
+        let m: u32;
+        // SAFETY: registers only: USUB8 sets the APSR.GE bit of each byte lane where
+        // `a ≥ b`, SEL takes that lane from `a`, the others from `b`.
+        unsafe {
+            asm!(
+                "usub8 {t}, {a}, {b}",
+                "sel {m}, {a}, {b}",
+                a = in(reg) a,
+                b = in(reg) b,
+                t = out(reg) _,
+                m = out(reg) m,
+                options(pure, nomem, nostack),
+            );
+        }
+        m
+    }
+
     fn fc2(x: &[i8], off: i32, w0: &[u8], w1: &[u8]) -> [i32; 2] {
         let n = x.len() / 4;
         if x.len() % 4 != 0 || w0.len() != x.len() || w1.len() != x.len() || n == 0 {

@@ -34,6 +34,8 @@ pub enum Mismatch {
     },
     /// A blob passed does not parse.
     BadBlob(u8),
+    /// [`Dot::max_u8x4`] on random words.
+    Max4(u32),
 }
 
 /// What ran, and the network's cost on the last blob (in `clock` ticks, 0 without a clock).
@@ -143,7 +145,15 @@ fn primitives(rng: &mut Rng, report: &mut Report) -> Result<(), Mismatch> {
         {
             return Err(Mismatch::Fc2(case));
         }
-        report.cases += 2;
+        // Random words, and words with some lanes equal.
+        let (a, b) = (rng.next(), rng.next());
+        let b2 = (a & 0x00FF_00FF) | (b & 0xFF00_FF00);
+        for (p, q) in [(a, b), (b, a), (a, b2), (b2, a), (a, a)] {
+            if Fast::max_u8x4(p, q) != Portable::max_u8x4(p, q) {
+                return Err(Mismatch::Max4(case));
+            }
+        }
+        report.cases += 3;
     }
     Ok(())
 }
