@@ -84,9 +84,11 @@ pub mod icp;
 pub mod pose_distance;
 pub mod precision;
 pub mod refine;
+pub mod sweep;
 
 pub use fits::*;
 pub use icp::*;
+pub use sweep::*;
 
 use crate::world::floorplan::{closest_on_segment, FloorPlan};
 use crate::world::geometry::{length, rotate, unit, v2, Pose2, Vec2};
