@@ -435,7 +435,6 @@ impl GhtLocalizer {
         };
         let mut cfg = self.cfg;
         cfg.sub_bins = FINE_SUB_BINS;
-        let (nx, ny) = (self.grid.nx as i32, self.grid.ny as i32);
         let (cx, cy) = (c0.ix as i32, c0.iy as i32);
         let k = self.grid.rot_bins as i32;
         let bins = [0i32, -1, 1].map(|d| (c0.bin as i32 + d).rem_euclid(k) as u8);
@@ -487,7 +486,24 @@ impl GhtLocalizer {
             self.fine_sums.reset(c0);
             return self.refine_argmax(all);
         }
-        let sums = &self.fine_sums;
+        let sums = &self.fine_sums.sums;
+        let best = self.best_in_window(c0, &bins, |b, w| {
+            sums[b].iter().map(|h| h[w] as u32).max().unwrap_or(0)
+        });
+        self.fine = Some((self.updates, best));
+    }
+
+    /// The interior cell of the 3 × 3 × 3 window around `c0` (bins `bins`) with the most
+    /// votes, `votes(b, w)` being window cell `w`'s in bin `bins[b]` at its best fine
+    /// heading; the coarse argmax `c0` keeps ties.
+    fn best_in_window(
+        &self,
+        c0: CellIndex,
+        bins: &[u8; 3],
+        votes: impl Fn(usize, usize) -> u32,
+    ) -> CellIndex {
+        let (nx, ny) = (self.grid.nx as i32, self.grid.ny as i32);
+        let (cx, cy) = (c0.ix as i32, c0.iy as i32);
         let mut best = (0u32, c0);
         for (b, &bin) in bins.iter().enumerate() {
             for w in 0..9 {
@@ -495,7 +511,7 @@ impl GhtLocalizer {
                 if x < 0 || y < 0 || x >= nx || y >= ny || !self.interior[(y * nx + x) as usize] {
                     continue;
                 }
-                let v = sums.sums[b].iter().map(|h| h[w] as u32).max().unwrap_or(0);
+                let v = votes(b, w);
                 let c = CellIndex {
                     ix: x as u8,
                     iy: y as u8,
@@ -507,7 +523,7 @@ impl GhtLocalizer {
                 }
             }
         }
-        self.fine = Some((self.updates, best.1));
+        best.1
     }
 
     /// The coarse-to-fine argmax as it was first written (every reading re-voted into a
@@ -558,26 +574,10 @@ impl GhtLocalizer {
                 }
             }
         }
-        let mut best = (0u32, c0);
-        for (b, &bin) in bins.iter().enumerate() {
-            for w in 0..9 {
-                let (x, y) = (cx + w as i32 % 3 - 1, cy + w as i32 / 3 - 1);
-                if x < 0 || y < 0 || x >= nx || y >= ny || !self.interior[(y * nx + x) as usize] {
-                    continue;
-                }
-                let v = sums[b].iter().map(|h| h[w]).max().unwrap_or(0);
-                let c = CellIndex {
-                    ix: x as u8,
-                    iy: y as u8,
-                    bin,
-                };
-                // The coarse argmax (first in this order) keeps ties.
-                if v > best.0 || (c == c0 && v == best.0) {
-                    best = (v, c);
-                }
-            }
-        }
-        self.fine = Some((self.updates, best.1));
+        let best = self.best_in_window(c0, &bins, |b, w| {
+            sums[b].iter().map(|h| h[w]).max().unwrap_or(0)
+        });
+        self.fine = Some((self.updates, best));
     }
 
     /// Evaluates a hypothetical measurement without committing it: the entropy the belief
