@@ -326,7 +326,21 @@ impl FloorPlan {
     /// it meets at a distance greater than `1e-6` m, or `None` when it meets none (an
     /// origin outside the room looking away from it).
     pub fn ray_cast(&self, origin: Vec2, dir: Vec2) -> Option<RayHit> {
-        let mut best: Option<RayHit> = None;
+        let (i, t) = self.nearest_wall_along(origin, dir)?;
+        let n = self.outward_normal(i);
+        let c = dir.x * n.x + dir.y * n.y;
+        Some(RayHit {
+            range: t,
+            wall: i,
+            incidence: acos(abs(c)),
+            point: origin + dir * t,
+        })
+    }
+
+    /// The wall a ray meets first and the distance along the ray (the first wall on
+    /// equal distances): what [`FloorPlan::ray_cast`] and [`FloorPlan::first_hit`] share.
+    fn nearest_wall_along(&self, origin: Vec2, dir: Vec2) -> Option<(usize, f32)> {
+        let mut best: Option<(usize, f32)> = None;
         for i in 0..self.len() {
             let (a, b) = self.wall(i);
             let e = b - a;
@@ -337,15 +351,8 @@ impl FloorPlan {
             let w = a - origin;
             let t = cross(w, e) / denom; // along the ray
             let u = cross(w, dir) / denom; // along the wall
-            if t > 1e-6 && (0.0..=1.0).contains(&u) && best.is_none_or(|h| t < h.range) {
-                let n = self.outward_normal(i);
-                let c = dir.x * n.x + dir.y * n.y;
-                best = Some(RayHit {
-                    range: t,
-                    wall: i,
-                    incidence: acos(abs(c)),
-                    point: origin + dir * t,
-                });
+            if t > 1e-6 && (0.0..=1.0).contains(&u) && best.is_none_or(|(_, h)| t < h) {
+                best = Some((i, t));
             }
         }
         best
@@ -390,22 +397,7 @@ impl FloorPlan {
     /// incidence angle and hit point): the visibility test of every ICP correspondence
     /// needs no more.
     pub fn first_hit(&self, origin: Vec2, dir: Vec2) -> Option<f32> {
-        let mut best: Option<f32> = None;
-        for i in 0..self.len() {
-            let (a, b) = self.wall(i);
-            let e = b - a;
-            let denom = cross(dir, e);
-            if abs(denom) < 1e-12 {
-                continue; // parallel
-            }
-            let w = a - origin;
-            let t = cross(w, e) / denom; // along the ray
-            let u = cross(w, dir) / denom; // along the wall
-            if t > 1e-6 && (0.0..=1.0).contains(&u) && best.is_none_or(|h| t < h) {
-                best = Some(t);
-            }
-        }
-        best
+        self.nearest_wall_along(origin, dir).map(|(_, t)| t)
     }
 
     /// The topological scan (paper §3.1, §4.1): `N` binary pixels spanning `fov` radians
