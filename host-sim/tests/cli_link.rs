@@ -76,6 +76,9 @@ fn relay(
     let mut noise = Noise(seed);
     let mut buf = [0u8; 512];
     let mut next_burst = Instant::now() + BURST_PERIOD;
+    // The first frame in each direction always gets a burst, so even a run shorter than a
+    // few periods meets noise inside its frames.
+    let mut first_frame = true;
     while !stop.load(Ordering::Relaxed) {
         let chunk: Vec<u8> = match from.read(&mut buf) {
             Ok(0) => return,
@@ -91,7 +94,8 @@ fn relay(
             Err(_) => return,
         };
         let mut out = chunk;
-        if Instant::now() >= next_burst {
+        if Instant::now() >= next_burst || (first_frame && !out.is_empty()) {
+            first_frame &= out.is_empty();
             let b = noise.burst();
             injected.bursts.fetch_add(1, Ordering::Relaxed);
             injected.bytes.fetch_add(b.len() as u64, Ordering::Relaxed);
@@ -101,7 +105,7 @@ fn relay(
                 noise.next() as usize % out.len()
             };
             out.splice(at..at, b);
-            next_burst += BURST_PERIOD;
+            next_burst = next_burst.max(Instant::now()) + BURST_PERIOD;
         }
         if !out.is_empty() {
             if to.write_all(&out).is_err() || to.flush().is_err() {
@@ -214,7 +218,10 @@ fn serial_run_survives_line_noise() {
             );
         }
         // The noise reached the frames: the device saw corrupt frames and the host re-sent.
-        assert!(bursts > 10 && bad > 0, "{bursts} bursts, {bad} bad frames");
+        // The bursts are paced by time, so a fast run sees fewer: a K = 10 run of three
+        // episodes takes about 0.3 s, 10-odd bursts at 50 ms in both directions. (A denser
+        // period hits most long replies and exhausts the retries: 25 ms does.)
+        assert!(bursts >= 5 && bad > 0, "{bursts} bursts, {bad} bad frames");
         assert!(resent(&stdout) > 0, "{stdout}");
     }
 }
