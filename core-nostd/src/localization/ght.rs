@@ -767,35 +767,17 @@ impl GhtLocalizer {
                 // Four cells at a time: their four heading slots read as words and reduced
                 // with `max4` (the caller's per-byte maximum: two DSP instructions on the
                 // M4, [`crate::policy::int8::dot::Dot::max_u8x4`]), then one look-up and
-                // one strided store per cell.
+                // one strided store per cell, inside the room or not (the cells outside are
+                // set below).
                 let quads = w / 4;
-                let word = |c: &[u8]| u32::from_le_bytes([c[0], c[1], c[2], c[3]]);
-                let rows = r0
-                    .chunks_exact(4)
-                    .zip(r1.chunks_exact(4))
-                    .zip(r2.chunks_exact(4))
-                    .zip(r3.chunks_exact(4))
-                    .zip(inside.chunks_exact(4))
-                    .zip(dst.chunks_mut(4 * k));
-                for (((((c0, c1), c2), c3), ins), d) in rows {
-                    let m = max4(max4(word(c0), word(c1)), max4(word(c2), word(c3)));
-                    // A cell outside the room never holds a vote (level 0), so where level 0
-                    // maps to `outside` anyway the test per cell is not needed.
-                    let pick = |j: usize| {
-                        let v = table[(m >> (8 * j)) as u8 as usize];
-                        if zero_is_outside || ins[j] {
-                            v
-                        } else {
-                            outside
-                        }
-                    };
-                    // The last quad's chunk may end right after its fourth cell.
-                    if d.len() > 3 * k {
-                        d[0] = pick(0);
-                        d[k] = pick(1);
-                        d[2 * k] = pick(2);
-                        d[3 * k] = pick(3);
-                    }
+                let rows = [r0, r1, r2, r3];
+                // The stride as a constant for the two localizers we ship (K = 1, 10): the
+                // strided stores then take immediate offsets, which frees the registers the
+                // loop otherwise spills (issue 22: the decision's worst case).
+                match k {
+                    10 => write_quads::<_, 10>(rows, dst, 10, quads, &max4, table),
+                    1 => write_quads::<_, 1>(rows, dst, 1, quads, &max4, table),
+                    _ => write_quads::<_, 0>(rows, dst, k, quads, &max4, table),
                 }
                 // Plain indices (the row slices are `w` long, so only the strided store is
                 // checked): an iterator chain with `step_by` cost twice the instructions.
@@ -807,6 +789,31 @@ impl GhtLocalizer {
                     };
                     if let Some(o) = dst.get_mut(x * k) {
                         *o = v;
+                    }
+                }
+            }
+        }
+        // A cell outside the room never holds a vote (level 0), so where level 0 maps to
+        // `outside` the quads above wrote it already. Otherwise its pixel gets `outside` in
+        // every bin now: the K planes of a pixel are adjacent, so this reads the interior
+        // mask once per pixel rather than once per cell (issue 22: 5 % of a K = 10 decision
+        // went to the test per cell).
+        if zero_is_outside {
+            return;
+        }
+        let quads = w / 4;
+        for y in 0..h {
+            let start = ((y + 1) * side + 1) * k;
+            for (x, _) in interior[y * nx..y * nx + 4 * quads]
+                .iter()
+                .enumerate()
+                .filter(|(_, &inside)| !inside)
+            {
+                if let Some(px) = out.get_mut(start + x * k..start + x * k + k) {
+                    // (A one-cell pixel without the call to `memset` that `fill` makes.)
+                    match px {
+                        [one] => *one = outside,
+                        _ => px.fill(outside),
                     }
                 }
             }
@@ -938,6 +945,43 @@ impl GhtLocalizer {
         self.total > 0.0
             && self.peak_mass(symmetry_order) >= crit.min_peak_mass
             && self.entropy() <= crit.max_entropy
+    }
+}
+
+/// The first `4 · quads` cells of one row of one bin into `dst` at stride `k` (cell `x` at
+/// `dst[x · k]`): `table[level]` of the cell's best slot, the slots `rows` reduced four
+/// cells at a time by `max4`. One bounds check per quad; the row slices are at least
+/// `4 · quads` long (a shorter `dst` ends the row early). `K` is `k` as a constant, or 0
+/// for a stride known only at run time.
+#[inline(always)]
+fn write_quads<T: Copy, const K: usize>(
+    rows: [&[u8]; 4],
+    dst: &mut [T],
+    k: usize,
+    quads: usize,
+    max4: &impl Fn(u32, u32) -> u32,
+    table: &[T; 256],
+) {
+    let [r0, r1, r2, r3] = rows;
+    let k = if K == 0 { k } else { K };
+    let word = |r: &[u8], x: usize| match r.get(x..x + 4) {
+        Some(c) => u32::from_le_bytes([c[0], c[1], c[2], c[3]]),
+        None => 0,
+    };
+    for q in 0..quads {
+        let x = 4 * q;
+        let m = max4(
+            max4(word(r0, x), word(r1, x)),
+            max4(word(r2, x), word(r3, x)),
+        );
+        let Some(d) = dst.get_mut(x * k..x * k + 3 * k + 1) else {
+            return;
+        };
+        let [b0, b1, b2, b3] = m.to_le_bytes();
+        d[0] = table[b0 as usize];
+        d[k] = table[b1 as usize];
+        d[2 * k] = table[b2 as usize];
+        d[3 * k] = table[b3 as usize];
     }
 }
 

@@ -280,7 +280,7 @@ impl Pipeline {
         let input = self.refine_input(&self.plan);
         let budget = Budget::per_reading(self.params.heading_known());
         let refined = match previous.filter(|_| budget.carry) {
-            Some(p) => refine::refine_after(&input, &p),
+            Some(p) => refine::refine_after(&input, &p, &budget),
             None => refine::refine_within(&input, &budget),
         };
         self.last_refinement = refined.ok().map(|r| (key, r));

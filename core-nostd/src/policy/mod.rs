@@ -152,7 +152,7 @@ impl PolicyInput<'_> {
 
     /// The value of every belief level (`table[level]`) and of a cell outside the room,
     /// each `map(probability / peak)`.
-    fn level_table<T: Copy>(&self, map: impl Fn(f32) -> T) -> ([T; 256], T) {
+    fn level_table<T: Copy + PartialEq>(&self, map: impl Fn(f32) -> T) -> ([T; 256], T) {
         let loc = self.localizer;
         // A cell's probability is a function of its level (0..=255) alone, and increases
         // with it: the peak is the top level's (the localizer keeps it), and each cell's value is one of 256, each
@@ -163,11 +163,26 @@ impl PolicyInput<'_> {
         let scale = if peak > 0.0 { 1.0 / peak } else { 0.0 };
         let outside = map(loc.prob_of_level(None) * scale);
         let mut table = [outside; 256];
-        for (m, t) in table.iter_mut().enumerate() {
-            if top.is_some_and(|t| m as u8 <= t) {
-                *t = map(loc.prob_of_level(Some(m as u8)) * scale);
+        let Some(top) = top else {
+            return (table, outside);
+        };
+        let value = |m: u8| map(loc.prob_of_level(Some(m)) * scale);
+        // Every step of `value` (a table read, a division, products, the caller's rounding)
+        // is monotone, so the values do not decrease with the level: from the top down, once
+        // a level gives level 0's value, every level below gives it too. Far below the peak
+        // that is most levels (they round to the zero point), and each one is two divisions
+        // and a software `roundf` on the M4 (issue 22: the decision's worst case).
+        let bottom = value(0);
+        let mut m = top;
+        while m > 0 {
+            let v = value(m);
+            if v == bottom {
+                break;
             }
+            table[m as usize] = v;
+            m -= 1;
         }
+        table[..=m as usize].fill(bottom);
         (table, outside)
     }
 
@@ -204,7 +219,12 @@ impl PolicyInput<'_> {
 
     /// The one belief extraction both writers share: `map(probability / peak)` per cell,
     /// `blank` outside the grid.
-    fn fill_belief<T: Copy>(&self, out: &mut [T], blank: T, map: impl Fn(f32) -> T) -> usize {
+    fn fill_belief<T: Copy + PartialEq>(
+        &self,
+        out: &mut [T],
+        blank: T,
+        map: impl Fn(f32) -> T,
+    ) -> usize {
         let loc = self.localizer;
         let n = self.belief_len();
         if !loc.is_ready() || out.len() < n {
@@ -341,6 +361,19 @@ mod tests {
                 let (scale_q, zp) = (1.0 / 255.0, -128);
                 let mut planar = [0i8; 10 * BELIEF_PLANE];
                 assert_eq!(input.write_belief_q(&mut planar, scale_q, zp), n);
+                // Each quantised cell is exactly the quantised probability (the level table
+                // stops evaluating levels once they give level 0's value).
+                let q = crate::policy::int8::QuantParams {
+                    scale: scale_q,
+                    zero_point: zp,
+                };
+                for i in 0..g.len() {
+                    let c = g.cell_at(i);
+                    let o =
+                        c.bin as usize * BELIEF_PLANE + c.iy as usize * BELIEF_SIDE + c.ix as usize;
+                    let want = crate::policy::int8::quantize_value(loc.prob(i) * scale, q);
+                    assert_eq!(planar[o], want, "int8 cell {i}");
+                }
                 let (side, kb) = (BELIEF_SIDE + 1, cfg.rot_bins as usize);
                 let mut hwc = [zp as i8; 31 * 31 * 10];
                 assert_eq!(input.write_belief_q_hwc(&mut hwc, scale_q, zp, side), n);
