@@ -73,8 +73,14 @@ const fn cli(
 /// Every committed artifact, in dependency order (one step a line: a table, not prose).
 #[rustfmt::skip]
 pub const STEPS: &[Step] = &[
-    cli("policy-k1", "policies/k1", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--out", "policies/k1"], 210),
-    cli("policy-k10", "policies/k10", &["train", "--rot-bins", "10", "--updates", "8000", "--seed", "1", "--lr", "1e-4", "--log-every", "50", "--out", "policies/k10"], 1500),
+    cli("policy-k1-seed1", "policies/k1/seeds/1", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--out", "policies/k1/seeds/1"], 215),
+    cli("policy-k1-seed2", "policies/k1/seeds/2", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "2", "--log-every", "50", "--out", "policies/k1/seeds/2"], 215),
+    cli("policy-k1-seed3", "policies/k1/seeds/3", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "3", "--log-every", "50", "--out", "policies/k1/seeds/3"], 215),
+    Step { runner: Runner::Example("select_seed"), stdout_to: Some("policies/k1/seeds.md"), ..cli("select-k1", "policies/k1", &["1", "policies/k1"], 60) },
+    cli("policy-k10-seed1", "policies/k10/seeds/1", &["train", "--rot-bins", "10", "--updates", "8000", "--seed", "1", "--lr", "1e-4", "--log-every", "50", "--out", "policies/k10/seeds/1"], 600),
+    cli("policy-k10-seed2", "policies/k10/seeds/2", &["train", "--rot-bins", "10", "--updates", "8000", "--seed", "2", "--lr", "1e-4", "--log-every", "50", "--out", "policies/k10/seeds/2"], 600),
+    cli("policy-k10-seed3", "policies/k10/seeds/3", &["train", "--rot-bins", "10", "--updates", "8000", "--seed", "3", "--lr", "1e-4", "--log-every", "50", "--out", "policies/k10/seeds/3"], 600),
+    Step { runner: Runner::Example("select_seed"), stdout_to: Some("policies/k10/seeds.md"), ..cli("select-k10", "policies/k10", &["10", "policies/k10"], 150) },
     cli("ablation-k1-no-registration-reward", "policies/ablations/k1-no-registration-reward", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--registration-reward", "0", "--out", "policies/ablations/k1-no-registration-reward"], 210),
     cli("ablation-k1-no-scans", "policies/ablations/k1-no-scans", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--inputs", "no-scans", "--out", "policies/ablations/k1-no-scans"], 210),
     cli("ablation-k1-no-belief", "policies/ablations/k1-no-belief", &["train", "--rot-bins", "1", "--updates", "12000", "--seed", "1", "--log-every", "50", "--inputs", "no-belief", "--out", "policies/ablations/k1-no-belief"], 210),

@@ -30,9 +30,14 @@ use std::ops::Range;
 pub const TRAIN_SEEDS: Range<u32> = 0..1_000_000;
 /// Seeds of the fixed evaluation set: 1000 plans.
 pub const TEST_SEEDS: Range<u32> = 1_000_000..1_001_000;
+/// Seeds of the validation set, on which the committed policy of a configuration is
+/// picked among its training seeds (`host-sim/examples/select_seed.rs`): drawn neither for
+/// training nor for the test.
+pub const VALIDATION_SEEDS: Range<u32> = 1_001_000..1_002_000;
 // The published seed ranges are disjoint and the test set has 1000 plans (checked at
 // compile time).
 const _: () = assert!(TRAIN_SEEDS.end <= TEST_SEEDS.start);
+const _: () = assert!(TEST_SEEDS.end <= VALIDATION_SEEDS.start);
 const _: () = assert!(TEST_SEEDS.end - TEST_SEEDS.start == 1000);
 
 /// Smallest bounding-box side (m).

@@ -1,0 +1,220 @@
+//! Which of the seeds of one training configuration is committed, and how far apart the
+//! seeds are (issue 21: at least three seeds behind every reported configuration, the
+//! committed one picked on validation plans, never on the test plans).
+//!
+//! `cargo run --release -p activesense-sim --example select_seed -- K DIR [VALIDATION_PLANS]`
+//! evaluates the learnt agent of every `DIR/seeds/S/policy.policy` (oracle stop, the paper's
+//! protocol) on the first `VALIDATION_PLANS` (default 500) validation plans
+//! ([`VALIDATION_SEEDS`]: drawn neither for training nor for the test), picks one by the
+//! rule below, copies its `policy.policy`, `log.csv`, `log.json` and `curve.svg` into `DIR`
+//! and prints a markdown table: every seed on the validation plans and, for the report only,
+//! on the 1000 test plans under the oracle stop and the calibrated stop (the instrument's
+//! own), with the mean and the standard deviation over the seeds.
+//!
+//! **The rule.** The lowest validation cost among the seeds whose validation recognition is
+//! within half a percentage point of the best seed's: recognition first (a cheap policy that
+//! fails is no policy), then cost (what the paper and a surveyor pay).
+
+use activesense_core::episode::{AgentKind, EpisodeConfig};
+use activesense_sim::episode::Termination;
+use activesense_sim::eval::harness::{self, EvalOptions};
+use activesense_sim::learn::agent::Policies;
+use activesense_sim::world::plans::{TEST_SEEDS, VALIDATION_SEEDS};
+use activesense_sim::world::sensor::SensorModel;
+use std::path::{Path, PathBuf};
+
+/// Recognition within this of the best seed's counts as equal.
+const RECOGNITION_SLACK: f64 = 0.005;
+/// The files of a training run that the configuration's directory holds for the chosen seed.
+const COPIED: &[&str] = &["policy.policy", "log.csv", "log.json", "curve.svg"];
+
+/// One seed's figures on one plan set.
+#[derive(Clone, Copy)]
+struct Figures {
+    recognition: f64,
+    cost: f64,
+    measurements: f64,
+    rotations: f64,
+    pose_error: f64,
+    wrong: u32,
+    stops: u32,
+}
+
+fn evaluate(
+    policy: &Path,
+    k: u8,
+    first_seed: u32,
+    plans: u32,
+    termination: Termination,
+) -> Figures {
+    let opts = EvalOptions {
+        agents: vec![AgentKind::Learnt],
+        rot_bins: vec![k],
+        plans,
+        first_seed,
+        episode_seed: 0,
+        config: EpisodeConfig::default(),
+        sensor: SensorModel::default(),
+        termination,
+        policy_files: vec![policy.display().to_string()],
+        policies: Policies::load(&[policy.to_path_buf()], &[k]).expect("seed policy"),
+        progress: false,
+        curve_plans: 0,
+        user_plans: Vec::new(),
+        refused_plans: Vec::new(),
+    };
+    let (report, _) = harness::run(&opts);
+    let r = &report.results[0];
+    Figures {
+        recognition: r.recognition_rate,
+        cost: r.cost,
+        measurements: r.measurements,
+        rotations: r.rotations,
+        pose_error: r.pose_error.unwrap_or(f64::NAN),
+        wrong: r.wrong_stops,
+        stops: r.stops,
+    }
+}
+
+/// A seed's name and its figures on the validation plans, the test plans (oracle stop) and
+/// the test plans (calibrated stop).
+type SeedRow = (String, Figures, Figures, Figures);
+
+fn mean_sd(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (m, var.sqrt())
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let (Some(k), Some(dir)) = (args.get(1).and_then(|a| a.parse::<u8>().ok()), args.get(2)) else {
+        eprintln!("usage: select_seed K DIR [VALIDATION_PLANS]");
+        std::process::exit(2);
+    };
+    let validation_plans: u32 = args.get(3).and_then(|a| a.parse().ok()).unwrap_or(500);
+    let dir = PathBuf::from(dir);
+    let mut seeds: Vec<(String, PathBuf)> = std::fs::read_dir(dir.join("seeds"))
+        .expect("DIR/seeds")
+        .filter_map(|e| e.ok())
+        .map(|e| (e.file_name().to_string_lossy().into_owned(), e.path()))
+        .filter(|(_, p)| p.join("policy.policy").is_file())
+        .collect();
+    seeds.sort_by_key(|(s, _)| s.parse::<u64>().unwrap_or(u64::MAX));
+    assert!(
+        seeds.len() >= 3,
+        "at least three seeds in {}",
+        dir.display()
+    );
+    let test_plans = TEST_SEEDS.end - TEST_SEEDS.start;
+    let rows: Vec<SeedRow> = seeds
+        .iter()
+        .map(|(s, p)| {
+            let policy = p.join("policy.policy");
+            eprintln!("select_seed: K = {k}, seed {s}");
+            (
+                s.clone(),
+                evaluate(
+                    &policy,
+                    k,
+                    VALIDATION_SEEDS.start,
+                    validation_plans,
+                    Termination::Oracle,
+                ),
+                evaluate(
+                    &policy,
+                    k,
+                    TEST_SEEDS.start,
+                    test_plans,
+                    Termination::Oracle,
+                ),
+                evaluate(
+                    &policy,
+                    k,
+                    TEST_SEEDS.start,
+                    test_plans,
+                    Termination::Confident,
+                ),
+            )
+        })
+        .collect();
+    let best_recognition = rows
+        .iter()
+        .map(|r| r.1.recognition)
+        .fold(f64::MIN, f64::max);
+    let chosen = rows
+        .iter()
+        .filter(|r| r.1.recognition >= best_recognition - RECOGNITION_SLACK)
+        .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
+        .map(|r| r.0.clone())
+        .expect("a seed");
+    for f in COPIED {
+        let from = dir.join("seeds").join(&chosen).join(f);
+        std::fs::copy(&from, dir.join(f)).unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+    }
+
+    println!(
+        "# K = {k}: the seeds behind `{}`\n",
+        dir.join("policy.policy").display()
+    );
+    println!(
+        "`cargo run --release -p activesense-sim --example select_seed -- {k} {} {validation_plans}`. \
+         Learnt agent; validation: plans {}..{} (oracle stop); test: the {test_plans} test plans \
+         (oracle stop as in Table 4, and the calibrated stop at its default 1 % risk), for the report \
+         only. Committed: **seed {chosen}**, the lowest validation cost among the seeds whose \
+         validation recognition is within {:.1} percentage points of the best.\n",
+        dir.display(),
+        VALIDATION_SEEDS.start,
+        VALIDATION_SEEDS.start + validation_plans,
+        RECOGNITION_SLACK * 100.0
+    );
+    println!(
+        "| seed | validation recognition | validation cost | test recognition | test cost | test measurements | test rotations | test pose error (m) | calibrated stop: test cost | wrong answers |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for (s, v, t, c) in &rows {
+        let mark = if *s == chosen { " (committed)" } else { "" };
+        println!(
+            "| {s}{mark} | {:.3} | {:.3} | {:.3} | {:.3} | {:.2} | {:.2} | {:.4} | {:.3} | {}/{} |",
+            v.recognition,
+            v.cost,
+            t.recognition,
+            t.cost,
+            t.measurements,
+            t.rotations,
+            t.pose_error,
+            c.cost,
+            c.wrong,
+            c.stops
+        );
+    }
+    let col = |f: &dyn Fn(&SeedRow) -> f64| -> (f64, f64) {
+        mean_sd(&rows.iter().map(f).collect::<Vec<_>>())
+    };
+    let cols = [
+        col(&|r| r.1.recognition),
+        col(&|r| r.1.cost),
+        col(&|r| r.2.recognition),
+        col(&|r| r.2.cost),
+        col(&|r| r.2.measurements),
+        col(&|r| r.2.rotations),
+        col(&|r| r.2.pose_error),
+        col(&|r| r.3.cost),
+        col(&|r| r.3.wrong as f64 / r.3.stops.max(1) as f64),
+    ];
+    let fmt = |(m, sd): (f64, f64), d: usize| format!("{m:.d$} ± {sd:.d$}");
+    println!(
+        "| mean ± sd over {} seeds | {} | {} | {} | {} | {} | {} | {} | {} | {} of answers |",
+        rows.len(),
+        fmt(cols[0], 3),
+        fmt(cols[1], 3),
+        fmt(cols[2], 3),
+        fmt(cols[3], 3),
+        fmt(cols[4], 2),
+        fmt(cols[5], 2),
+        fmt(cols[6], 4),
+        fmt(cols[7], 3),
+        fmt((cols[8].0 * 100.0, cols[8].1 * 100.0), 2) + " %",
+    );
+}
