@@ -2,14 +2,20 @@
 //! seeds are (issue 21: at least three seeds behind every reported configuration, the
 //! committed one picked on validation plans, never on the test plans).
 //!
-//! `cargo run --release -p activesense-sim --example select_seed -- K DIR [VALIDATION_PLANS]`
+//! `cargo run --release -p activesense-sim --example select_seed -- K DIR [VALIDATION_PLANS] [pick]`
 //! evaluates the learnt agent of every `DIR/seeds/S/policy.policy` (oracle stop, the paper's
 //! protocol) on the first `VALIDATION_PLANS` (default 500) validation plans
-//! ([`VALIDATION_SEEDS`]: drawn neither for training nor for the test), picks one by the
-//! rule below, copies its `policy.policy`, `log.csv`, `log.json` and `curve.svg` into `DIR`
-//! and prints a markdown table: every seed on the validation plans and, for the report only,
-//! on the 1000 test plans under the oracle stop and the calibrated stop (the instrument's
-//! own), with the mean and the standard deviation over the seeds.
+//! ([`VALIDATION_SEEDS`]: drawn neither for training nor for the test) and picks one by the
+//! rule below.
+//!
+//! * With `pick`, it copies the pick's `policy.policy`, `log.csv`, `log.json` and `curve.svg`
+//!   into `DIR` and prints the validation table (`DIR/pick.md`). `cargo xtask reproduce` runs
+//!   this right after training: the int8 blob, the stop's calibration and every `results/`
+//!   run use the committed policy.
+//! * Without, it checks that `DIR/policy.policy` is the pick's and prints the report
+//!   (`DIR/seeds.md`): every seed on the validation plans and, for the report only, on the
+//!   1000 test plans under the oracle stop and under the calibrated stop (the instrument's
+//!   own, fitted after the pick), with the mean and the standard deviation over the seeds.
 //!
 //! **The rule.** The lowest validation cost among the seeds whose validation recognition is
 //! within half a percentage point of the best seed's: recognition first (a cheap policy that
@@ -107,67 +113,93 @@ fn main() {
         "at least three seeds in {}",
         dir.display()
     );
+    let pick_only = args.get(4).map(String::as_str) == Some("pick");
     let test_plans = TEST_SEEDS.end - TEST_SEEDS.start;
-    let rows: Vec<SeedRow> = seeds
+    let validation: Vec<(String, Figures)> = seeds
         .iter()
         .map(|(s, p)| {
-            let policy = p.join("policy.policy");
-            eprintln!("select_seed: K = {k}, seed {s}");
-            (
-                s.clone(),
-                evaluate(
-                    &policy,
-                    k,
-                    VALIDATION_SEEDS.start,
-                    validation_plans,
-                    Termination::Oracle,
-                ),
-                evaluate(
-                    &policy,
-                    k,
-                    TEST_SEEDS.start,
-                    test_plans,
-                    Termination::Oracle,
-                ),
-                evaluate(
-                    &policy,
-                    k,
-                    TEST_SEEDS.start,
-                    test_plans,
-                    Termination::Confident,
-                ),
-            )
+            eprintln!("select_seed: K = {k}, seed {s}, validation plans");
+            let v = evaluate(
+                &p.join("policy.policy"),
+                k,
+                VALIDATION_SEEDS.start,
+                validation_plans,
+                Termination::Oracle,
+            );
+            (s.clone(), v)
         })
         .collect();
-    let best_recognition = rows
+    let best_recognition = validation
         .iter()
         .map(|r| r.1.recognition)
         .fold(f64::MIN, f64::max);
-    let chosen = rows
+    let chosen = validation
         .iter()
         .filter(|r| r.1.recognition >= best_recognition - RECOGNITION_SLACK)
         .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
         .map(|r| r.0.clone())
         .expect("a seed");
-    for f in COPIED {
-        let from = dir.join("seeds").join(&chosen).join(f);
-        std::fs::copy(&from, dir.join(f)).unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+    let chosen_dir = dir.join("seeds").join(&chosen);
+    let header = |what: &str| {
+        println!("# K = {k}: {what} `{}`\n", dir.join("policy.policy").display());
+        println!(
+            "`cargo run --release -p activesense-sim --example select_seed -- {k} {} {validation_plans}{}`. \
+             Learnt agent; validation: plans {}..{} (oracle stop). Committed: **seed {chosen}**, the \
+             lowest validation cost among the seeds whose validation recognition is within {:.1} \
+             percentage points of the best.\n",
+            dir.display(),
+            if pick_only { " pick" } else { "" },
+            VALIDATION_SEEDS.start,
+            VALIDATION_SEEDS.start + validation_plans,
+            RECOGNITION_SLACK * 100.0
+        );
+    };
+    if pick_only {
+        for f in COPIED {
+            let from = chosen_dir.join(f);
+            std::fs::copy(&from, dir.join(f))
+                .unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+        }
+        header("the pick among the seeds for");
+        println!("| seed | validation recognition | validation cost | validation pose error (m) |");
+        println!("|---|---|---|---|");
+        for (s, v) in &validation {
+            let mark = if *s == chosen { " (committed)" } else { "" };
+            println!(
+                "| {s}{mark} | {:.3} | {:.3} | {:.4} |",
+                v.recognition, v.cost, v.pose_error
+            );
+        }
+        return;
     }
-
+    let committed = std::fs::read(dir.join("policy.policy")).expect("DIR/policy.policy");
+    let picked = std::fs::read(chosen_dir.join("policy.policy")).expect("the pick's policy");
+    if committed != picked {
+        eprintln!(
+            "{}/policy.policy is not seed {chosen}'s: run the pick first (`select_seed -- {k} {} {validation_plans} pick`)",
+            dir.display(),
+            dir.display()
+        );
+        std::process::exit(1);
+    }
+    let rows: Vec<SeedRow> = validation
+        .iter()
+        .zip(&seeds)
+        .map(|((s, v), (_, p))| {
+            let policy = p.join("policy.policy");
+            eprintln!("select_seed: K = {k}, seed {s}, test plans");
+            (
+                s.clone(),
+                *v,
+                evaluate(&policy, k, TEST_SEEDS.start, test_plans, Termination::Oracle),
+                evaluate(&policy, k, TEST_SEEDS.start, test_plans, Termination::Confident),
+            )
+        })
+        .collect();
+    header("the seeds behind");
     println!(
-        "# K = {k}: the seeds behind `{}`\n",
-        dir.join("policy.policy").display()
-    );
-    println!(
-        "`cargo run --release -p activesense-sim --example select_seed -- {k} {} {validation_plans}`. \
-         Learnt agent; validation: plans {}..{} (oracle stop); test: the {test_plans} test plans \
-         (oracle stop as in Table 4, and the calibrated stop at its default 1 % risk), for the report \
-         only. Committed: **seed {chosen}**, the lowest validation cost among the seeds whose \
-         validation recognition is within {:.1} percentage points of the best.\n",
-        dir.display(),
-        VALIDATION_SEEDS.start,
-        VALIDATION_SEEDS.start + validation_plans,
-        RECOGNITION_SLACK * 100.0
+        "Test: the {test_plans} test plans (oracle stop as in Table 4, and the calibrated stop at its \
+         default 1 % risk), for the report only.\n"
     );
     println!(
         "| seed | validation recognition | validation cost | test recognition | test cost | test measurements | test rotations | test pose error (m) | calibrated stop: test cost | wrong answers |"
