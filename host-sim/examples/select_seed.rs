@@ -141,7 +141,10 @@ fn main() {
         .expect("a seed");
     let chosen_dir = dir.join("seeds").join(&chosen);
     let header = |what: &str| {
-        println!("# K = {k}: {what} `{}`\n", dir.join("policy.policy").display());
+        println!(
+            "# K = {k}: {what} `{}`\n",
+            dir.join("policy.policy").display()
+        );
         println!(
             "`cargo run --release -p activesense-sim --example select_seed -- {k} {} {validation_plans}{}`. \
              Learnt agent; validation: plans {}..{} (oracle stop). Committed: **seed {chosen}**, the \
@@ -157,8 +160,7 @@ fn main() {
     if pick_only {
         for f in COPIED {
             let from = chosen_dir.join(f);
-            std::fs::copy(&from, dir.join(f))
-                .unwrap_or_else(|e| panic!("{}: {e}", from.display()));
+            std::fs::copy(&from, dir.join(f)).unwrap_or_else(|e| panic!("{}: {e}", from.display()));
         }
         header("the pick among the seeds for");
         println!("| seed | validation recognition | validation cost | validation pose error (m) |");
@@ -191,8 +193,20 @@ fn main() {
             (
                 s.clone(),
                 *v,
-                evaluate(&policy, k, TEST_SEEDS.start, test_plans, Termination::Oracle),
-                evaluate(&policy, k, TEST_SEEDS.start, test_plans, Termination::Confident),
+                evaluate(
+                    &policy,
+                    k,
+                    TEST_SEEDS.start,
+                    test_plans,
+                    Termination::Oracle,
+                ),
+                evaluate(
+                    &policy,
+                    k,
+                    TEST_SEEDS.start,
+                    test_plans,
+                    Termination::Confident,
+                ),
             )
         })
         .collect();

@@ -10,7 +10,8 @@
 //! sequence errors, re-sent replies and abandoned episodes must stay 0, as must the host's
 //! re-sent requests, dropped replies and reply time-outs on this clean line. The device's
 //! largest update (cycles since power-on) is reported, not asserted: it depends on the
-//! plans. Not watched: the stack's high-water mark, which the firmware does not measure.
+//! plans, and without `-icount` QEMU's timers follow the host's wall time, so it is not an
+//! instruction count (`cargo xtask mcu-bench` counts instructions). Not watched: the stack's high-water mark, which the firmware does not measure.
 
 use activesense_core::episode::AgentKind;
 use activesense_sim::episode::EpisodeSpec;
