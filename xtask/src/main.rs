@@ -385,28 +385,13 @@ fn ci() -> Result<()> {
     qemu_log::run_task()?;
     // Every cheap committed artifact still comes out of the code: the int8 blobs, the first
     // plans of every committed evaluation, the size table and the first updates of every
-    // seed's learning curve behind the committed policies and the K = 1 ablations. The three
-    // K = 10 ablation policies are left out, by name, until they are retrained on today's
-    // reward path (they were trained before the multi-hypothesis refinement; README
-    // "Reproducing every artifact").
-    reproduce::run(&[
-        "--check".into(),
-        "--skip".into(),
-        ABLATION_TRAINING.join(","),
-    ])?;
+    // committed learning curve (the seeds behind the policies and all six ablations).
+    reproduce::run(&["--check".into()])?;
     println!("xtask ci: all green in {:.0} s", t0.elapsed().as_secs_f32());
     // The plain closing line CI readers look for.
     println!("ci: {passed} passed, {failed} failed, {ignored} skipped");
     Ok(())
 }
-
-/// The training steps of the K = 10 ablation policies, whose committed curves predate
-/// today's reward path (CI's `--check` skips them; the K = 1 ones were retrained).
-const ABLATION_TRAINING: &[&str] = &[
-    "ablation-k10-no-registration-reward",
-    "ablation-k10-no-scans",
-    "ablation-k10-no-belief",
-];
 
 /// Runs a `cargo test` command, echoing its output, and totals the "test result" lines.
 fn test_counted(cmd: &mut Command) -> Result<(u64, u64, u64)> {
