@@ -66,6 +66,7 @@ fn evaluate(
         policies: Policies::load(&[policy.to_path_buf()], &[k]).expect("seed policy"),
         progress: false,
         curve_plans: 0,
+        tolerance: Default::default(),
         user_plans: Vec::new(),
         refused_plans: Vec::new(),
     };

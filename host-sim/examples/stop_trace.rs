@@ -2,7 +2,7 @@
 //!
 //! Runs heuristic-1 on the first N test plans to the action limit and records, after every
 //! reading, whether the belief argmax is a coarse success, whether the confident stop's
-//! answer (the cell the refined pose lies in, `Pipeline::answer_cell`) is, and the
+//! answer (the refined pose) is within the surveyor's tolerance (5 cm, 0.5°), and the
 //! calibrated stop's risk estimate. From those traces it replays the confident rule for
 //! several stop risks P, with the episode answering at the action limit either with its last
 //! reading or with its lowest-risk moment (what `Pipeline::finish` does), next to the
@@ -16,9 +16,10 @@
 
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::Termination;
-use activesense_core::localization::grid::CellIndex;
 use activesense_core::policy::BaselineAgent;
+use activesense_core::registration::pose_distance::{PoseDistance, Tolerance};
 use activesense_core::stop::StopModel;
+use activesense_core::Pose2;
 use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
 use activesense_sim::world::plans::TEST_SEEDS;
 use rayon::prelude::*;
@@ -49,21 +50,26 @@ fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
         }
         let order = pipe.symmetry_order();
         let argmax_right = pipe.localizer().coarse_success(v.truth, order);
-        let right_cell = |c: CellIndex| pipe.localizer().grid().coarse_success(c, v.truth, order);
+        // Right: the refined pose within the surveyor's tolerance (what the stop's label is).
+        let distance = PoseDistance::with_order(v.plan, order);
+        let right_pose = |p: &Pose2| Tolerance::SURVEYOR.admits(&distance.agent_errors(p, v.truth));
         // Past the stop gate one refinement gives the features and the answer; below it the
-        // answer still is the refined pose's cell, else (nothing registers) the argmax.
+        // answer still is the refined pose, else (nothing registers) the argmax's cell.
         let point = match pipe.stop_point() {
-            Some((f, cell)) => Point {
-                readings: n,
-                right: right_cell(cell),
-                argmax_right,
-                risk: Some(StopModel::for_rot_bins(rot_bins).risk(&f)),
-                overruled: Some(!f.agrees),
-            },
+            Some(sp) => {
+                let f = sp.features;
+                Point {
+                    readings: n,
+                    right: right_pose(&sp.pose),
+                    argmax_right,
+                    risk: Some(StopModel::for_rot_bins(rot_bins).risk(&f)),
+                    overruled: Some(!f.agrees),
+                }
+            }
             None => Point {
                 readings: n,
                 right: match pipe.refine(v.plan) {
-                    Ok(r) => pipe.answer_cell(&r).is_some_and(right_cell),
+                    Ok(r) => right_pose(&r.registration.pose),
                     Err(_) => argmax_right,
                 },
                 argmax_right,

@@ -3,8 +3,9 @@
 //! Episodes of several agents run on calibration plans (generated seeds from
 //! `--first-seed`, far from the test set) to the action limit. After every returned range
 //! whose belief passes the stop gate, the pipeline's [`StopFeatures`] are recorded with the
-//! label "the answer is wrong": the cell the refined pose lies in is not a coarse success
-//! against the truth ([`activesense_core::pipeline::Pipeline::answer_cell`]). A logistic
+//! label "the answer is wrong": the refined pose the stop would answer with is outside the
+//! surveyor's tolerance of the truth (5 cm and 0.5° modulo symmetry,
+//! [`Tolerance::SURVEYOR`], what the no-oracle table judges). A logistic
 //! regression per rotation setting (Newton–Raphson / IRLS in f64 with a small ridge) is
 //! fitted on the even-indexed plans and checked on the odd-indexed ones: the reliability
 //! of its estimate at every step, and what the stop rule "stop at the first step whose
@@ -17,6 +18,7 @@ use crate::eval::harness::{episode_bar, EvalOptions};
 use crate::learn::agent::{run_agent_episode_observed, Policies};
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
+use activesense_core::registration::pose_distance::PoseDistance;
 use activesense_core::stop::{StopFeatures, StopModel, FEATURES};
 use clap::Args;
 use rayon::prelude::*;
@@ -72,7 +74,7 @@ pub struct Sample {
     pub plan: u32,
     /// What the stop rule sees.
     pub features: StopFeatures,
-    /// The belief argmax is not a coarse success.
+    /// The answer (the refined pose) is outside the tolerance of the truth.
     pub wrong: bool,
 }
 
@@ -86,6 +88,7 @@ pub fn collect(opts: &EvalOptions, rot_bins: u8, progress: bool) -> Vec<EpisodeS
         .iter()
         .flat_map(|&a| (0..opts.plans).map(move |i| (a, i)))
         .collect();
+    let tolerance = opts.tolerance;
     let bar = episode_bar(jobs.len() as u64, progress);
     let out = jobs
         .par_iter()
@@ -98,13 +101,15 @@ pub fn collect(opts: &EvalOptions, rot_bins: u8, progress: bool) -> Vec<EpisodeS
                     return;
                 }
                 let pipe = v.runner.pipeline();
-                // The label: is the cell the refined pose lies in (the answer) wrong?
-                if let Some((features, answer)) = pipe.stop_point() {
-                    let grid = pipe.localizer().grid();
+                // The label: is the answer (the refined pose) outside the surveyor's
+                // tolerance of the truth?
+                if let Some(point) = pipe.stop_point() {
+                    let distance = PoseDistance::with_order(v.plan, pipe.symmetry_order());
+                    let errors = distance.agent_errors(&point.pose, v.truth);
                     samples.push(Sample {
                         plan: i,
-                        features,
-                        wrong: !grid.coarse_success(answer, v.truth, pipe.symmetry_order()),
+                        features: point.features,
+                        wrong: !tolerance.admits(&errors),
                     });
                 }
             })
@@ -217,7 +222,7 @@ fn solve<const D: usize>(mut a: [[f64; D]; D], mut b: [f64; D]) -> Option<[f64; 
 pub struct HeldOut {
     /// Decision points.
     pub samples: usize,
-    /// Fraction of them with a wrong answer (the refined pose's cell).
+    /// Fraction of them with a wrong answer (the refined pose outside the tolerance).
     pub wrong_rate: f64,
     /// Reliability per bin of the estimated risk `[0, .005, .01, .02, .05, .1, .2, .5, 1]`:
     /// (samples, mean estimated risk, observed wrong rate).
@@ -320,7 +325,7 @@ pub fn markdown(fitted: &[Fitted], command: &str) -> String {
     for f in fitted {
         let h = &f.held_out;
         s.push_str(&format!(
-            "## K = {}\n\nFitted on {} decision points; weights {:?}, bias {:.3}.\n\nHeld-out: {} decision points in {} episodes, {:.1} % with a wrong answer (the cell the refined pose lies in).\n\n",
+            "## K = {}\n\nFitted on {} decision points; weights {:?}, bias {:.3}.\n\nHeld-out: {} decision points in {} episodes, {:.1} % with a wrong answer (the refined pose outside 5 cm / 0.5° of the truth).\n\n",
             f.model.rot_bins,
             f.fit_samples,
             f.model.weights.iter().map(|w| (w * 1000.0).round() / 1000.0).collect::<Vec<_>>(),
@@ -398,6 +403,7 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
         policies,
         progress: !a.no_progress,
         curve_plans: 0,
+        tolerance: Default::default(),
         user_plans: Vec::new(),
         refused_plans: Vec::new(),
     };

@@ -91,8 +91,9 @@ pub const STEPS: &[Step] = &[
     cli("int8-k10", "policies/k10", &["policy", "quantize", "--policy", "policies/k10/policy.policy", "--out", "policies/k10/policy.q8"], 2),
     cli("agreement", "results", &["policy", "agreement", "--rot-bins", "1,10", "--plans", "200", "--int8", "policies/k1/policy.q8", "--int8", "policies/k10/policy.q8", "--json", "results/policy-agreement.json"], 60),
     Step { rebuilds: true, ..cli("calibration", "results/calibration", &["calibrate"], 640) },
-    cli("main-job", "results", &["eval", "--agents", "all", "--rot-bins", "1,10", "--plans", "1000", "--out", "results/", "--no-progress"], 180),
+    cli("main-job", "results", &["eval", "--agents", "all", "--rot-bins", "1,10", "--plans", "1000", "--with-no-oracle", "--out", "results/", "--no-progress"], 300),
     cli("confident", "results/confident", &["eval", "--agents", "heuristic-1,learnt,learnt-int8,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--curve-plans", "0", "--out", "results/confident"], 300),
+    cli("frontier", "results/frontier", &["eval", "--agents", "learnt,heuristic-1,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--stop-risks", "0.001,0.003,0.01,0.03,0.1", "--curve-plans", "0", "--no-progress", "--out", "results/frontier"], 900),
     Step { runner: Runner::Example("select_seed"), stdout_to: Some("policies/k1/seeds.md"), ..cli("seeds-k1", "policies/k1", &["1", "policies/k1"], 60) },
     Step { runner: Runner::Example("select_seed"), stdout_to: Some("policies/k10/seeds.md"), ..cli("seeds-k10", "policies/k10", &["10", "policies/k10"], 150) },
     cli("greedy", "results/greedy", &["eval", "--agents", "oigm,oigm-cost,eem,heuristic-1", "--rot-bins", "1,10", "--plans", "1000", "--out", "results/greedy", "--no-progress"], 423),
@@ -513,18 +514,25 @@ fn check_eval_prefixes(ctx: &Ctx) -> Result<Vec<String>> {
         .iter()
         .filter(|s| s.args.first() == Some(&"eval") && ctx.step(s))
     {
-        if s.args.contains(&"--extra-measurements") {
-            // results/extra keeps only per-budget aggregates, no per-episode records.
+        if s.args.contains(&"--extra-measurements") || s.args.contains(&"--stop-risks") {
+            // results/extra and the frontier keep only aggregates, no per-episode records.
             continue;
         }
-        let committed = ctx.committed.join(s.dir).join("results.json");
-        let Ok(text) = std::fs::read_to_string(&committed) else {
-            stale.push(format!(
-                "{}/results.json is missing (step {})",
-                s.dir, s.name
-            ));
+        // `--with-no-oracle` writes a second run into no-oracle/: both are compared.
+        let mut files = vec!["results.json".to_string()];
+        if s.args.contains(&"--with-no-oracle") {
+            files.push("no-oracle/results.json".into());
+        }
+        let mut committed_texts = Vec::new();
+        for f in &files {
+            match std::fs::read_to_string(ctx.committed.join(s.dir).join(f)) {
+                Ok(t) => committed_texts.push((f.clone(), t)),
+                Err(_) => stale.push(format!("{}/{f} is missing (step {})", s.dir, s.name)),
+            }
+        }
+        if committed_texts.len() < files.len() {
             continue;
-        };
+        }
         let out = dir.join(s.name);
         let out_str = out.to_string_lossy().into_owned();
         let plans = CHECK_PLANS.to_string();
@@ -538,9 +546,11 @@ fn check_eval_prefixes(ctx: &Ctx) -> Result<Vec<String>> {
                 .current_dir(root())
                 .stdout(Stdio::null()),
         )?;
-        let fresh = std::fs::read_to_string(out.join("results.json"))?;
-        if let Some(d) = first_difference(&text, &fresh)? {
-            stale.push(format!("{}/results.json (step {}): {d}", s.dir, s.name));
+        for (f, text) in &committed_texts {
+            let fresh = std::fs::read_to_string(out.join(f))?;
+            if let Some(d) = first_difference(text, &fresh)? {
+                stale.push(format!("{}/{f} (step {}): {d}", s.dir, s.name));
+            }
         }
     }
     Ok(stale)

@@ -76,6 +76,17 @@ pub enum Stop {
     Confident,
 }
 
+/// One decision point of the calibrated stop: what it would read and what it would answer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopPoint {
+    /// The features the stop's model reads.
+    pub features: StopFeatures,
+    /// The cell the refined pose lies in ([`Pipeline::answer_cell`]).
+    pub cell: CellIndex,
+    /// The refined pose (AgentPose), the answer itself.
+    pub pose: Pose2,
+}
+
 /// The pipeline's answer at the end of an episode.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PipelineResult {
@@ -311,18 +322,20 @@ impl Pipeline {
     /// mass reaches [`stop::GATE_PEAK_MASS`], before [`Pipeline::min_measurements`], or when
     /// the readings do not register.
     pub fn stop_features(&self) -> Option<StopFeatures> {
-        self.stop_point().map(|(f, _)| f)
+        self.stop_point().map(|p| p.features)
     }
 
-    /// [`Pipeline::stop_features`] together with the cell the stop would answer with
-    /// ([`Pipeline::answer_cell`]), from one refinement (the calibration's label).
-    pub fn stop_point(&self) -> Option<(StopFeatures, CellIndex)> {
+    /// [`Pipeline::stop_features`] together with the answer the stop would give, from one
+    /// refinement: the calibration labels it against the truth (the pose by the surveyor's
+    /// tolerance; the cell for the grid-based recognition).
+    pub fn stop_point(&self) -> Option<StopPoint> {
         let peak_mass = self.stop_gate()?;
         let refined = self.refine(&self.plan).ok()?;
-        Some((
-            self.features_of(peak_mass, &refined)?,
-            self.answer_cell(&refined)?,
-        ))
+        Some(StopPoint {
+            features: self.features_of(peak_mass, &refined)?,
+            cell: self.answer_cell(&refined)?,
+            pose: refined.registration.pose,
+        })
     }
 
     /// The belief's peak mass when the stop gate is open (enough readings, peak mass at

@@ -58,7 +58,7 @@
 
 use crate::world::floorplan::{FloorPlan, MAX_VERTICES};
 use crate::world::geometry::{length, Pose2};
-use crate::world::math::{cos, sin, sqrt, TAU};
+use crate::world::math::{cos, sin, sqrt, wrap_angle, TAU};
 use crate::world::symmetry::{symmetry_order, SymmetryTolerance};
 use heapless::Vec as HVec;
 
@@ -167,6 +167,74 @@ impl PoseDistance {
     /// inverses, the model→scene registrations (m).
     pub fn agent_distance(&self, p1: &Pose2, p2: &Pose2) -> f32 {
         self.distance(&p1.inverse(), &p2.inverse())
+    }
+}
+
+/// A surveyor's two errors of an answered pose, modulo the room's symmetry: where the
+/// instrument is (m) and where it points (rad, absolute). Unlike the pose distance, which
+/// folds both into one number of metres, these are what a tolerance is written in.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PoseErrors {
+    /// Distance between the answered and the true instrument position in the model frame (m).
+    pub position: f32,
+    /// Absolute heading difference, wrapped to `[0, π]` (rad).
+    pub heading: f32,
+}
+
+/// When an answered pose counts as right: position and heading error both within bounds.
+/// The default is the surveyor's ([`Tolerance::SURVEYOR`]); `eval --tolerance` sets it.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Tolerance {
+    /// Largest position error of a right answer (m).
+    pub position_m: f32,
+    /// Largest heading error of a right answer (rad).
+    pub heading_rad: f32,
+}
+
+impl Tolerance {
+    /// 5 cm and 0.5°: a setting-out tolerance a surveyor accepts for a free station before
+    /// fine-aiming at control points (issue 21's default).
+    pub const SURVEYOR: Tolerance = Tolerance {
+        position_m: 0.05,
+        heading_rad: 0.5 * core::f32::consts::PI / 180.0,
+    };
+
+    /// Whether `e` is within the tolerance (NaN errors are not).
+    pub fn admits(&self, e: &PoseErrors) -> bool {
+        e.position <= self.position_m && e.heading <= self.heading_rad
+    }
+}
+
+impl Default for Tolerance {
+    fn default() -> Self {
+        Tolerance::SURVEYOR
+    }
+}
+
+impl PoseDistance {
+    /// Position and heading error of the AgentPose `answer` against `truth`, taken at the
+    /// symmetric equivalent of `answer` whose heading is nearest the truth's (rotating
+    /// `(a, h)` by `2πk/n` about the model origin; the shared symmetry convention).
+    pub fn agent_errors(&self, answer: &Pose2, truth: &Pose2) -> PoseErrors {
+        let n = self.order as u32;
+        let mut best = PoseErrors {
+            position: f32::INFINITY,
+            heading: f32::INFINITY,
+        };
+        for k in 0..n {
+            let g = TAU * k as f32 / n as f32;
+            let heading = wrap_angle(answer.theta + g - truth.theta).abs();
+            if heading < best.heading {
+                let (c, s) = (cos(g), sin(g));
+                let (x, y) = (c * answer.x - s * answer.y, s * answer.x + c * answer.y);
+                let (dx, dy) = (x - truth.x, y - truth.y);
+                best = PoseErrors {
+                    position: sqrt(dx * dx + dy * dy),
+                    heading,
+                };
+            }
+        }
+        best
     }
 }
 
@@ -301,6 +369,63 @@ mod tests {
         assert!(
             (d.agent_distance(&p1, &p3) - d.distance(&p1.inverse(), &p3.inverse())).abs() < 1e-6
         );
+    }
+
+    #[test]
+    fn surveyor_errors_by_hand() {
+        let tol = SymmetryTolerance::default();
+        let truth = Pose2::new(1.0, -0.5, 0.3);
+        // L-shaped room (no symmetry): 3 cm east, 4 cm north, 0.4° off: 5 cm, inside.
+        let d = PoseDistance::new(&l_room(), &tol);
+        let deg = core::f32::consts::PI / 180.0;
+        let a = Pose2::new(1.03, -0.46, 0.3 + 0.4 * deg);
+        let e = d.agent_errors(&a, &truth);
+        assert!((e.position - 0.05).abs() < 1e-5, "{e:?}");
+        assert!((e.heading - 0.4 * deg).abs() < 1e-6);
+        assert!(Tolerance::SURVEYOR.admits(&PoseErrors {
+            position: 0.0499,
+            heading: 0.4 * deg
+        }));
+        // 0.6° is outside however close the position.
+        let b = Pose2::new(1.0, -0.5, 0.3 - 0.6 * deg);
+        assert!(!Tolerance::SURVEYOR.admits(&d.agent_errors(&b, &truth)));
+        // 6 cm is outside.
+        let c = Pose2::new(1.06, -0.5, 0.3);
+        assert!(!Tolerance::SURVEYOR.admits(&d.agent_errors(&c, &truth)));
+        // Headings wrap: 359.8° against 0.1° is 0.3° apart.
+        let t0 = Pose2::new(0.0, 0.0, 0.1 * deg);
+        let w = d.agent_errors(&Pose2::new(0.0, 0.0, 359.8 * deg), &t0);
+        assert!((w.heading - 0.3 * deg).abs() < 1e-5, "{w:?}");
+        // The L-room's half-turn is a different, wrong answer.
+        let q = rotate(v2(truth.x, truth.y), core::f32::consts::PI);
+        let twin = Pose2::new(q.x, q.y, truth.theta + core::f32::consts::PI);
+        assert!(!Tolerance::SURVEYOR.admits(&d.agent_errors(&twin, &truth)));
+    }
+
+    #[test]
+    fn symmetric_twin_is_right_in_a_rectangle_and_square() {
+        let tol = SymmetryTolerance::default();
+        let truth = Pose2::new(0.8, 0.3, -1.0);
+        // A rectangle's half-turn twin, 2 cm off: right, and the error is the 2 cm.
+        let d = PoseDistance::new(&rectangle(), &tol);
+        let q = rotate(v2(truth.x + 0.02, truth.y), core::f32::consts::PI);
+        let twin = Pose2::new(q.x, q.y, truth.theta + core::f32::consts::PI);
+        let e = d.agent_errors(&twin, &truth);
+        assert!((e.position - 0.02).abs() < 1e-4, "{e:?}");
+        assert!(e.heading < 1e-5);
+        assert!(Tolerance::SURVEYOR.admits(&e));
+        // A quarter turn is no twin of a rectangle, but is of a square.
+        let q = rotate(v2(truth.x, truth.y), core::f32::consts::FRAC_PI_2);
+        let quarter = Pose2::new(q.x, q.y, truth.theta + core::f32::consts::FRAC_PI_2);
+        assert!(!Tolerance::SURVEYOR.admits(&d.agent_errors(&quarter, &truth)));
+        let ds = PoseDistance::new(&square(), &tol);
+        let e = ds.agent_errors(&quarter, &truth);
+        assert!(e.position < 1e-4 && e.heading < 1e-5, "{e:?}");
+        // NaN is never right.
+        assert!(!Tolerance::SURVEYOR.admits(&PoseErrors {
+            position: f32::NAN,
+            heading: 0.0
+        }));
     }
 
     proptest! {

@@ -304,6 +304,11 @@ pub struct Budget {
     /// work per refinement from growing with a long episode (issue 22: a 27-reading
     /// update took 54.6 M instructions on the device). `u8::MAX`: never fewer.
     pub full_readings: u8,
+    /// ICP iterations inside each annealing round past [`Budget::full_readings`]
+    /// readings (at most [`Budget::icp_iterations`]): a long episode's pose is pinned by
+    /// its many readings, so its ICPs converge in a few iterations or oscillate; each
+    /// iteration there costs a correspondence per reading.
+    pub long_icp_iterations: u16,
 }
 
 impl Budget {
@@ -320,6 +325,7 @@ impl Budget {
         final_from_winner: false,
         carry: false,
         full_readings: u8::MAX,
+        long_icp_iterations: u16::MAX,
     };
     /// Leave-outs only for the worst [`SCREEN_CANDIDATES`] unexplained readings, a short
     /// sweep, capped ICPs and a short final annealing from the screened winner: most
@@ -333,23 +339,31 @@ impl Budget {
         final_from_winner: true,
         carry: true,
         full_readings: LEAVE_OUT_MAX_READINGS as u8,
+        long_icp_iterations: 30,
     };
 
     /// What the refinement after each reading past the stop gate spends (the calibrated
-    /// stop's features come from it, [`crate::stop`]). Without the heading,
-    /// [`Budget::SCREENED`]. With it every leave-out is tried and nothing is carried: there
+    /// stop's features come from it, [`crate::stop`]): [`Budget::SCREENED`] with the
+    /// annealing's ICPs stopped at [`PER_READING_LONG_ICP_ITERATIONS`] past
+    /// [`Budget::full_readings`] readings. With the heading known nothing is carried: there
     /// is no heading sweep, so a fresh search is cheap, and the carried re-fit stays in the
     /// previous reading's basin, which left confident K = 1 answers 0.5 mm further from the
-    /// truth (learnt: 5.6 against 5.1 mm, outside the interval; `docs/EVALUATION.md`).
+    /// truth (learnt: 5.6 against 5.1 mm, outside the interval; `docs/EVALUATION.md`). It
+    /// tries the screened leave-outs, not every one: every leave-out, after every reading of
+    /// a long K = 1 episode, was its worst on-device update (40.9 M instructions, issue 22);
+    /// the end of the episode still tries every one ([`Budget::end_of_episode`]).
     pub const fn per_reading(heading_known: bool) -> Budget {
         if heading_known {
             Budget {
-                leave_outs: u8::MAX,
                 carry: false,
+                long_icp_iterations: PER_READING_LONG_ICP_ITERATIONS,
                 ..Budget::SCREENED
             }
         } else {
-            Budget::SCREENED
+            Budget {
+                long_icp_iterations: PER_READING_LONG_ICP_ITERATIONS,
+                ..Budget::SCREENED
+            }
         }
     }
 
@@ -399,9 +413,14 @@ impl Budget {
     /// [`Budget::icp_iterations`], the rounds at `rounds`, the perturbations at
     /// [`Budget::perturbations`].
     fn cap(&self, params: &AnnealParams, rounds: u16, readings: usize) -> AnnealParams {
+        let iterations = if readings > self.full_readings as usize {
+            self.icp_iterations.min(self.long_icp_iterations)
+        } else {
+            self.icp_iterations
+        };
         AnnealParams {
             icp: IcpParams {
-                max_iterations: params.icp.max_iterations.min(self.icp_iterations),
+                max_iterations: params.icp.max_iterations.min(iterations),
                 ..params.icp
             },
             max_rounds: params.max_rounds.min(rounds),
@@ -410,6 +429,10 @@ impl Budget {
         }
     }
 }
+
+/// ICP iterations per annealing round of the per-reading refinement past
+/// [`Budget::full_readings`] readings ([`Budget::per_reading`]).
+pub const PER_READING_LONG_ICP_ITERATIONS: u16 = 12;
 
 /// Single leave-outs the screened search tries: the worst unexplained readings.
 pub const SCREEN_CANDIDATES: usize = 2;

@@ -3,7 +3,9 @@
 //! `--extra-measurements`, the pose error past the minimal set.
 
 use super::{command_line, SensorArgs};
-use crate::episode::{parse_agent, parse_observability, parse_stop_risk, termination_parser};
+use crate::episode::{
+    parse_agent, parse_observability, parse_stop_risk, parse_tolerance, termination_parser,
+};
 use crate::learn::agent::Policies;
 use crate::world::planfile::{self, PlanReadArgs};
 use crate::world::plans;
@@ -88,6 +90,21 @@ pub struct EvalArgs {
     /// 'Calibrated stop'). The instrument applies the same rule.
     #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
     stop_risk: f32,
+    /// When an answer is right: position error in metres and heading error in degrees,
+    /// modulo the room's symmetry (results.json `right`, `wrong_of_answered`; the
+    /// no-oracle table).
+    #[arg(long, default_value = "0.05,0.5", value_parser = parse_tolerance)]
+    tolerance: activesense_core::registration::pose_distance::Tolerance,
+    /// Also evaluate the same agents stopping by themselves (`--termination confident`)
+    /// and write that run into OUT/no-oracle/: the table an instrument without an oracle
+    /// lives by (README, "Without an oracle").
+    #[arg(long)]
+    with_no_oracle: bool,
+    /// With --termination confident: run the evaluation once per stop risk (comma-separated,
+    /// e.g. 0.001,0.003,0.01,0.03,0.1) and write the risk–cost frontier (frontier.md,
+    /// frontier.json, frontier.svg) instead of Table 4.
+    #[arg(long, value_delimiter = ',', value_parser = parse_stop_risk)]
+    stop_risks: Vec<f32>,
 }
 
 #[derive(Clone)]
@@ -150,6 +167,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         policies: Policies::default(),
         progress: !a.no_progress && std::io::stderr().is_terminal(),
         curve_plans: a.curve_plans,
+        tolerance: a.tolerance,
     };
     let mut opts = opts;
     if opts.agents.contains(&AgentKind::Learnt) {
@@ -169,6 +187,28 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .chain(opts.policies.int8().map(|p| p.describe()))
         .collect();
     let command = command_line();
+    if !a.stop_risks.is_empty() {
+        if opts.termination != crate::episode::Termination::Confident {
+            bail!("--stop-risks sweeps the calibrated stop: give --termination confident");
+        }
+        let t0 = std::time::Instant::now();
+        let f = crate::eval::frontier::run(&opts, &a.stop_risks);
+        std::fs::create_dir_all(&a.out)
+            .with_context(|| format!("cannot create {}", a.out.display()))?;
+        let md = crate::eval::frontier::markdown(&f, &command);
+        for (name, body) in [
+            ("frontier.json", serde_json::to_string_pretty(&f)? + "\n"),
+            ("frontier.md", md.clone()),
+            ("frontier.svg", crate::eval::frontier::svg(&f)),
+        ] {
+            let p = a.out.join(name);
+            std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
+            println!("wrote {}", p.display());
+        }
+        print!("{md}");
+        println!("{:.1} s wall time", t0.elapsed().as_secs_f64());
+        return Ok(());
+    }
     if let Some(extra) = a.extra_measurements {
         eprintln!(
             "following {} agent(s) x {} rotation setting(s) x {} plans for {extra} ranges past the minimal set",
@@ -203,16 +243,45 @@ pub fn run(a: EvalArgs) -> Result<()> {
     );
     let (report, timing) = harness::run(&opts);
     let files = report::write_outputs(&report, &timing, &a.out, &command)?;
-    println!("agent         bins  recognition  pose error (m)  measurements  rotations   cost");
+    print_summary(&report, &timing, &files);
+    if a.with_no_oracle && opts.termination != crate::episode::Termination::Confident {
+        let mut no_oracle = opts.clone();
+        no_oracle.termination = crate::episode::Termination::Confident;
+        // The pose-error curve registers after every measurement: it is the oracle run's.
+        no_oracle.curve_plans = 0;
+        let dir = a.out.join("no-oracle");
+        eprintln!(
+            "without an oracle: the same {} episodes, each stopping by itself (calibrated stop, --stop-risk {})",
+            opts.agents.len() * opts.rot_bins.len() * opts.plans as usize,
+            opts.config.stop_risk
+        );
+        let (report, timing) = harness::run(&no_oracle);
+        let files = report::write_outputs(&report, &timing, &dir, &command)?;
+        print_summary(&report, &timing, &files);
+    }
+    Ok(())
+}
+
+/// The terminal summary of one evaluation: a line per group, the wall time, the files.
+fn print_summary(
+    report: &crate::eval::harness::EvalReport,
+    timing: &crate::eval::harness::Timing,
+    files: &[PathBuf],
+) {
+    println!(
+        "agent         bins  recognition  pose error (m)  right  wrong/answered  measurements  rotations   cost"
+    );
     for r in &report.results {
         println!(
-            "{:<12}  {:>4}  {:>11.3}  {:>14}  {:>12.2}  {:>9.2}  {:.3}",
+            "{:<12}  {:>4}  {:>11.3}  {:>14}  {:>5.3}  {:>14.4}  {:>12.2}  {:>9.2}  {:.3}",
             r.agent,
             r.rot_bins,
             r.recognition_rate,
             r.pose_error
                 .map(|e| format!("{e:.4}"))
                 .unwrap_or_else(|| "-".into()),
+            r.answers.right,
+            r.answers.wrong_of_answered,
             r.measurements,
             r.rotations,
             r.cost
@@ -222,5 +291,4 @@ pub fn run(a: EvalArgs) -> Result<()> {
     for f in files {
         println!("wrote {}", f.display());
     }
-    Ok(())
 }

@@ -22,7 +22,7 @@ use activesense_core::pipeline::runner::EpisodeRunner;
 use activesense_core::pipeline::{PipelineResult, Stop};
 use activesense_core::policy::BaselineAgent;
 use activesense_core::policy::Policy;
-use activesense_core::registration::pose_distance::PoseDistance;
+use activesense_core::registration::pose_distance::{PoseDistance, PoseErrors, Tolerance};
 use activesense_core::registration::Registration;
 use activesense_core::world::math::splitmix64;
 use activesense_core::{FloorPlan, Pose2};
@@ -218,6 +218,11 @@ pub struct Outcome {
     /// Symmetry-aware pose distance of the final estimate to the truth (m): the refined one,
     /// or the coarse one when registration was not possible (fewer than 2 measurements).
     pub pose_error: Option<f32>,
+    /// The surveyor's errors of the final estimate (the one `pose_error` scores): position
+    /// (m) and heading (rad), modulo symmetry
+    /// ([`PoseDistance::agent_errors`]); what `--tolerance` judges.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub errors: Option<PoseErrors>,
     /// Why registration did not run or failed, if it did not produce a pose.
     pub registration_note: Option<String>,
     /// The calibrated stop's estimate of P(wrong) at the end
@@ -389,6 +394,7 @@ pub fn score(plan: &FloorPlan, truth: &Pose2, result: &PipelineResult) -> Outcom
         // Without a registration (fewer than 2 measurements) the pipeline's answer is
         // the coarse estimate, and that is what gets scored.
         pose_error: result.best().map(err),
+        errors: result.best().map(|p| distance.agent_errors(&p, truth)),
         stop_risk: result.stop_risk,
         answer_readings: result.answer_readings,
         registration_note: result.registration_error.map(|e| {
@@ -399,6 +405,29 @@ pub fn score(plan: &FloorPlan, truth: &Pose2, result: &PipelineResult) -> Outcom
             }
         }),
     }
+}
+
+/// Whether an episode's answer is right for a surveyor: it answered (the termination rule
+/// ended it, not the action limit) and its final pose is within `tol` of the truth.
+pub fn answer_is_right(t: &Trajectory, tol: &Tolerance) -> bool {
+    t.end != EndReason::ActionLimit && t.outcome.errors.is_some_and(|e| tol.admits(&e))
+}
+
+/// Command-line parser for `--tolerance METRES,DEGREES` (e.g. `0.05,0.5`).
+pub fn parse_tolerance(s: &str) -> Result<Tolerance, String> {
+    let bad = || format!("--tolerance wants METRES,DEGREES (e.g. 0.05,0.5), got {s:?}");
+    let (m, d) = s.split_once(',').ok_or_else(bad)?;
+    let m: f32 = m.trim().parse().map_err(|_| bad())?;
+    let d: f32 = d.trim().parse().map_err(|_| bad())?;
+    if !(m.is_finite() && d.is_finite() && m > 0.0 && d > 0.0) {
+        return Err(format!(
+            "--tolerance: both bounds must be positive, got {s:?}"
+        ));
+    }
+    Ok(Tolerance {
+        position_m: m,
+        heading_rad: d.to_radians(),
+    })
 }
 
 /// Command-line parser for `--termination` (shared by every subcommand).

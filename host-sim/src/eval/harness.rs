@@ -9,6 +9,7 @@ use crate::learn::agent::{run_agent_episode_observed, Policies};
 use crate::world::sensor::SensorModel;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
+use activesense_core::registration::pose_distance::Tolerance;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -50,6 +51,9 @@ pub struct EvalOptions {
     /// generated plans, and `plans` is their number.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub user_plans: Vec<crate::world::planfile::NamedPlan>,
+    /// When an answer is right (`--tolerance`; default 5 cm and 0.5°).
+    #[serde(default)]
+    pub tolerance: Tolerance,
     /// Plan files `--plans-from` refused, with why (listed in `results.md`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub refused_plans: Vec<String>,
@@ -216,7 +220,7 @@ pub fn run(opts: &EvalOptions) -> (EvalReport, Timing) {
         .iter()
         .zip(per_group)
         .zip(&curves)
-        .map(|((&(a, k), rows), c)| aggregate(a, k, rows, c, opts.curve_plans))
+        .map(|((&(a, k), rows), c)| aggregate(a, k, rows, c, opts.curve_plans, &opts.tolerance))
         .collect();
     (
         EvalReport {

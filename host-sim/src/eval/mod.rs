@@ -20,16 +20,21 @@
 //!   away). The mean over all registered episodes (`pose_error_all`) and the median over
 //!   recognised ones are reported beside it;
 //! - *measurements / rotations*: mean counts per episode, including failed episodes that
-//!   ran to the action limit.
+//!   ran to the action limit;
+//! - *right / wrong / unanswered* (the no-oracle table): an episode is answered when its
+//!   termination rule ended it; an answer is right when its final pose is within the
+//!   tolerance (`--tolerance`, default 5 cm and 0.5°) of the truth modulo symmetry.
 
 //!
 //! Modules, lowest first: [`record`] (one episode's row and curve), [`stats`] (intervals and
 //! the per-group aggregation), [`harness`] (options, the parallel run, the report),
 //! [`paper`] (the paper's Table 4, quoted), [`report`] (results.md and the output files),
-//! [`experiments`] (the extra-measurements analysis). The charts are drawn by
+//! [`experiments`] (the extra-measurements analysis), [`frontier`] (the stop's risk–cost
+//! frontier over several `--stop-risk` settings). The charts are drawn by
 //! [`crate::plot`] from plain numbers.
 
 pub mod experiments;
+pub mod frontier;
 pub mod harness;
 pub mod paper;
 pub mod record;

@@ -27,6 +27,13 @@ pub struct EpisodeRow {
     pub pose_error: Option<f32>,
     /// Pose error of the coarse estimate (m).
     pub coarse_error: Option<f32>,
+    /// Position error of the final pose, modulo symmetry (m): with `heading_error_deg`, what
+    /// the tolerance judges.
+    #[serde(default)]
+    pub position_error: Option<f32>,
+    /// Heading error of the final pose, modulo symmetry (degrees).
+    #[serde(default)]
+    pub heading_error_deg: Option<f32>,
     /// Room symmetry order.
     pub symmetry_order: u8,
     /// Measurements taken at an encoder bearing already measured in the episode.
@@ -56,6 +63,8 @@ impl EpisodeRow {
             cost: t.summary.cost,
             pose_error: t.outcome.pose_error,
             coarse_error: t.outcome.coarse_error,
+            position_error: t.outcome.errors.map(|e| e.position),
+            heading_error_deg: t.outcome.errors.map(|e| e.heading.to_degrees()),
             symmetry_order: t.outcome.symmetry_order,
             final_peak_mass: 0.0,
             stopped_by_rule: t.end != crate::episode::EndReason::ActionLimit,

@@ -6,7 +6,7 @@
 use super::harness::{EvalOptions, EvalReport, Timing};
 use super::paper;
 use super::record::{CURVE_MAX_COST, MAX_BUDGET};
-use super::stats::{REGISTERED_TOLERANCE, RELIABILITY_BINS, RELIABILITY_MIN_EPISODES};
+use super::stats::{RELIABILITY_BINS, RELIABILITY_MIN_EPISODES};
 use crate::episode::Termination;
 use crate::plot::{self, BudgetLine, ReliabilityLine, UtilityLine};
 use anyhow::{Context, Result};
@@ -108,7 +108,7 @@ pub fn markdown(report: &EvalReport, timing: &Timing, command: &str) -> String {
         perf_table(&mut s, report, k);
         reliability_table(&mut s, report, k);
         if o.termination == Termination::Confident {
-            stop_table(&mut s, report, k);
+            answer_table(&mut s, report, k);
         }
     }
     paper::side_by_side(&mut s, report);
@@ -143,33 +143,53 @@ fn perf_table(s: &mut String, report: &EvalReport, k: u8) {
     let _ = writeln!(s);
 }
 
-/// The calibrated stop's record per agent (`--termination confident`).
-fn stop_table(s: &mut String, report: &EvalReport, k: u8) {
+/// What the instrument answered by itself, per agent, judged by the surveyor's tolerance
+/// (`--tolerance`): the no-oracle table. Also the calibrated stop's own record (wrong stops
+/// by the grid cell, the estimated risk it claimed), for continuity with the cell-based
+/// recognition.
+pub(crate) fn answer_table(s: &mut String, report: &EvalReport, k: u8) {
+    let a = report.results.first().map(|r| &r.answers);
+    let (m, d) = a.map_or((0.0, 0.0), |a| (a.tolerance_m, a.tolerance_deg));
     let _ = writeln!(
         s,
-        "Calibrated stop (`--stop-risk {}`): how many episodes the rule stopped, how many of those stops were wrong \
-         (the answer, the cell the refined pose lies in, not a coarse success), the mean estimated risk at the stops \
-         (what the rule claimed), and the episodes whose final pose is within {} cm of the truth, recognised or not. \
-         Recognition here scores that answer; oracle-terminated runs score the belief argmax.\n",
+        "Answers without an oracle (termination `{:?}`, `--stop-risk {}`): an episode is answered when the rule \
+         stopped it, unanswered when it reached the action limit; an answer is right when its pose is within \
+         {:.1} cm and {:.2}° of the truth (modulo the room's symmetry). Pose errors are of the right answers. \
+         Wrong stops (of stops) count by the grid cell, as recognition does.\n",
+        report.options.termination,
         report.options.config.stop_risk,
-        100.0 * REGISTERED_TOLERANCE
+        100.0 * m,
+        d
     );
     let _ = writeln!(
         s,
-        "| agent | stopped by the rule | wrong stops (of stops) | mean estimated risk at stop | recognition | pose within {} cm |\n|---|---|---|---|---|---|",
-        100.0 * REGISTERED_TOLERANCE
+        "| agent | right [95% CI] | wrong (of answered) [95% CI] | unanswered | measurements | rotations | cost | position error mean / median / p95 (m) | heading error mean (°) | recognition (cell) | wrong stops, cell (of stops) | mean estimated risk at stop |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in report.results.iter().filter(|r| r.rot_bins == k) {
+        let a = &r.answers;
         let _ = writeln!(
             s,
-            "| {} | {:.3} | {} ({:.4}) | {} | {:.3} | {:.3} |",
+            "| {} | {:.3} [{:.3}, {:.3}] | {} ({:.4}) [{:.4}, {:.4}] | {:.3} | {:.2} | {:.2} | {:.3} | {} / {} / {} | {} | {:.3} | {} ({:.4}) | {} |",
             r.agent,
-            r.stops as f64 / r.plans.max(1) as f64,
+            a.right,
+            a.right_ci95[0],
+            a.right_ci95[1],
+            a.wrong,
+            a.wrong_of_answered,
+            a.wrong_of_answered_ci95[0],
+            a.wrong_of_answered_ci95[1],
+            a.unanswered,
+            r.measurements,
+            r.rotations,
+            r.cost,
+            opt(a.right_position_error, 4),
+            opt(a.right_position_error_median, 4),
+            opt(a.right_position_error_p95, 4),
+            opt(a.right_heading_error_deg, 3),
+            r.recognition_rate,
             r.wrong_stops,
             r.wrong_stops as f64 / r.stops.max(1) as f64,
             opt(r.mean_risk_at_stop, 4),
-            r.recognition_rate,
-            r.registered
         );
     }
     let _ = writeln!(s);

@@ -6,6 +6,7 @@
 
 use super::record::{curve_cost, EpisodeCurve, EpisodeRow, CURVE_POINTS, MAX_BUDGET};
 use activesense_core::episode::AgentKind;
+use activesense_core::registration::pose_distance::{PoseErrors, Tolerance};
 use serde::{Deserialize, Serialize};
 
 /// A mean with its 95 % confidence interval (normal approximation, 1.96 standard errors).
@@ -140,14 +141,89 @@ pub struct GroupResult {
     /// Mean calibrated risk estimate at the confident stops.
     #[serde(default)]
     pub mean_risk_at_stop: Option<f64>,
-    /// Episodes whose final pose is within [`REGISTERED_TOLERANCE`] of the truth (symmetry-
-    /// aware), recognised or not: what the surveyor gets.
-    #[serde(default)]
-    pub registered: f64,
+    /// What the instrument answered by itself, judged by the surveyor's tolerance (the
+    /// no-oracle table): `right`, `wrong_of_answered`, `unanswered`, … at the top level of
+    /// the group in `results.json`.
+    #[serde(flatten)]
+    pub answers: Answers,
 }
 
-/// Pose error (m) up to which an episode counts as registered in the confident-stop table.
-pub const REGISTERED_TOLERANCE: f32 = 0.05;
+/// The answers of one group judged by a [`Tolerance`]: an episode *answered* when its
+/// termination rule ended it (not the action limit); an answer is *right* when its final
+/// pose is within the tolerance of the truth modulo symmetry, *wrong* otherwise.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Answers {
+    /// The tolerance: position (m).
+    pub tolerance_m: f64,
+    /// The tolerance: heading (degrees).
+    pub tolerance_deg: f64,
+    /// Fraction of all episodes answered right.
+    pub right: f64,
+    /// Wilson 95 % interval of `right`.
+    pub right_ci95: [f64; 2],
+    /// Wrong answers.
+    pub wrong: u32,
+    /// Episodes answered.
+    pub answered: u32,
+    /// Fraction of the answered episodes answered wrong (0 when none answered).
+    pub wrong_of_answered: f64,
+    /// Wilson 95 % interval of `wrong_of_answered`.
+    pub wrong_of_answered_ci95: [f64; 2],
+    /// Fraction of all episodes that reached the action limit without an answer.
+    pub unanswered: f64,
+    /// Mean position error of the right answers (m).
+    pub right_position_error: Option<f64>,
+    /// Median position error of the right answers (m).
+    pub right_position_error_median: Option<f64>,
+    /// 95th percentile of the position error of the right answers (m).
+    pub right_position_error_p95: Option<f64>,
+    /// Mean heading error of the right answers (degrees).
+    pub right_heading_error_deg: Option<f64>,
+}
+
+impl Answers {
+    pub(crate) fn of(rows: &[EpisodeRow], tol: &Tolerance) -> Self {
+        let n = rows.len() as u32;
+        let answered: Vec<&EpisodeRow> = rows.iter().filter(|r| r.stopped_by_rule).collect();
+        let is_right = |r: &EpisodeRow| match (r.position_error, r.heading_error_deg) {
+            (Some(p), Some(h)) => tol.admits(&PoseErrors {
+                position: p,
+                heading: h.to_radians(),
+            }),
+            _ => false,
+        };
+        let right: Vec<&EpisodeRow> = answered.iter().copied().filter(|r| is_right(r)).collect();
+        let a = answered.len() as u32;
+        let k = right.len() as u32;
+        let wrong = a - k;
+        let mut pos: Vec<f64> = right
+            .iter()
+            .filter_map(|r| r.position_error.map(f64::from))
+            .collect();
+        pos.sort_by(f64::total_cmp);
+        let head: Vec<f64> = right
+            .iter()
+            .filter_map(|r| r.heading_error_deg.map(f64::from))
+            .collect();
+        let (rlo, rhi) = wilson(k, n);
+        let (wlo, whi) = wilson(wrong, a);
+        Answers {
+            tolerance_m: tol.position_m as f64,
+            tolerance_deg: (tol.heading_rad as f64).to_degrees(),
+            right: k as f64 / n.max(1) as f64,
+            right_ci95: [rlo, rhi],
+            wrong,
+            answered: a,
+            wrong_of_answered: wrong as f64 / a.max(1) as f64,
+            wrong_of_answered_ci95: [wlo, whi],
+            unanswered: (n - a) as f64 / n.max(1) as f64,
+            right_position_error: MeanCi::of(&pos).map(|m| m.mean),
+            right_position_error_median: median(&mut pos.clone()),
+            right_position_error_p95: quantile(&pos, 0.95),
+            right_heading_error_deg: MeanCi::of(&head).map(|m| m.mean),
+        }
+    }
+}
 
 /// Bins of the reliability diagram: stated confidence `[i/10, (i+1)/10)` (the last bin
 /// includes 1).
@@ -252,6 +328,7 @@ pub(crate) fn aggregate(
     rows: Vec<EpisodeRow>,
     curves: &[EpisodeCurve],
     curve_plans: u32,
+    tolerance: &Tolerance,
 ) -> GroupResult {
     let n = rows.len() as u32;
     let rec = rows.iter().filter(|r| r.recognised).count() as u32;
@@ -340,11 +417,7 @@ pub(crate) fn aggregate(
                 .collect::<Vec<_>>(),
         )
         .map(|m| m.mean),
-        registered: rows
-            .iter()
-            .filter(|r| r.pose_error.is_some_and(|e| e <= REGISTERED_TOLERANCE))
-            .count() as f64
-            / n.max(1) as f64,
+        answers: Answers::of(&rows, tolerance),
         episodes: rows,
     }
 }

@@ -23,6 +23,7 @@ fn small(plans: u32) -> EvalOptions {
         policies: Policies::default(),
         progress: false,
         curve_plans: 3,
+        tolerance: Default::default(),
         user_plans: Vec::new(),
         refused_plans: Vec::new(),
     }
@@ -89,4 +90,43 @@ fn eta_waits_for_warm_up_then_uses_the_mean_rate() {
     assert_eq!(run_eta(1, 4, s(10), 2), None); // fewer than one per thread
     assert_eq!(run_eta(250, 1000, s(60), 2), Some(s(180)));
     assert_eq!(run_eta(1000, 1000, s(60), 2), Some(s(0)));
+}
+
+#[test]
+fn answers_add_up_and_follow_the_tolerance() {
+    let mut o = small(10);
+    o.termination = Termination::Confident;
+    let (rep, _) = run(&o);
+    for g in &rep.results {
+        let a = &g.answers;
+        let n = g.plans as f64;
+        let answered = g.episodes.iter().filter(|r| r.stopped_by_rule).count() as u32;
+        assert_eq!(a.answered, answered);
+        // right + wrong + unanswered = every episode.
+        let right = (a.right * n).round() as u32;
+        assert_eq!(
+            right + a.wrong + ((a.unanswered * n).round() as u32),
+            g.plans
+        );
+        // Every right answer is within 5 cm and 0.5°; a looser tolerance never has fewer.
+        let within = |r: &super::record::EpisodeRow, m: f32, d: f32| {
+            r.stopped_by_rule
+                && r.position_error.is_some_and(|p| p <= m)
+                && r.heading_error_deg.is_some_and(|h| h <= d)
+        };
+        assert_eq!(
+            right as usize,
+            g.episodes.iter().filter(|r| within(r, 0.05, 0.5)).count()
+        );
+        let loose = super::stats::Answers::of(
+            &g.episodes,
+            &activesense_core::registration::pose_distance::Tolerance {
+                position_m: 1.0,
+                heading_rad: 0.5,
+            },
+        );
+        assert!(loose.right >= a.right && loose.wrong <= a.wrong);
+        assert!(a.wrong_of_answered_ci95[0] <= a.wrong_of_answered);
+        assert!(a.wrong_of_answered <= a.wrong_of_answered_ci95[1]);
+    }
 }
