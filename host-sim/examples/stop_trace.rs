@@ -126,7 +126,7 @@ fn main() {
         ever(|p| p.argmax_right)
     );
     println!(
-        "answer (refined pose's cell) right at some reading: {:.3}",
+        "answer (refined pose within 5 cm and 0.5°) right at some reading: {:.3}",
         ever(|p| p.right)
     );
     // Where the refinement leaves the argmax's cell, which of the two is right?
@@ -136,7 +136,7 @@ fn main() {
         .filter(|q| q.overruled == Some(true))
         .collect();
     println!(
-        "readings past the stop gate where the refined pose left the argmax's cell: {}; the refined pose's cell right in {}, the argmax in {}",
+        "readings past the stop gate where the refined pose left the argmax's cell: {}; the refined pose right in {}, the argmax's cell in {}",
         overruled.len(),
         overruled.iter().filter(|q| q.right).count(),
         overruled.iter().filter(|q| q.argmax_right).count()
@@ -155,7 +155,7 @@ fn main() {
     println!(
         "P = 0.01: {gap} episodes with the answer right at some reading but answered wrongly; in {unestimated} of them it was right only at readings without a risk estimate (below the gate)"
     );
-    println!("| P | stopped | wrong stops | recognition, last reading | recognition, lowest-risk moment | same moments scored by the argmax |");
+    println!("| P | stopped | wrong stops | right, last reading | right, lowest-risk moment | same moments scored by the argmax's cell |");
     println!("|---|---|---|---|---|---|");
     for p in [0.005f32, 0.01, 0.02, 0.03, 0.05, 0.1] {
         let (mut stops, mut wrong, mut last, mut lowest, mut argmax) = (0, 0, 0, 0, 0);
