@@ -3,7 +3,8 @@
 //! rows of Table 4 against `results/results.json`, the greedy, greedy-confident and ablation
 //! tables against their runs, the int8 agreement table against `results/policy-agreement.json`,
 //! the Fig.-4 table against `docs/inspect/k{1,10}/aggregate.md`, the calibrated-stop table against
-//! `results/confident/results.json`, the four MCU tables against `results/mcu-bench/*.md`
+//! `results/confident/results.json`, the no-oracle table against `results/no-oracle/results.json`,
+//! the frontier against `results/frontier/frontier.json`, the four MCU tables against `results/mcu-bench/*.md`
 //! (verbatim), and the size table against `results/size.md`.
 
 use serde_json::Value;
@@ -109,6 +110,8 @@ fn table_4_ours_rows_are_the_main_job() {
 fn the_calibrated_stop_table_is_results_confident() {
     let readme = read("README.md");
     let confident = json("results/confident/results.json");
+    let main = json("results/results.json");
+    let greedy = json("results/greedy/results.json");
     let mut checked = 0;
     for c in table_after(
         &readme,
@@ -117,34 +120,130 @@ fn the_calibrated_stop_table_is_results_confident() {
         let line = c.join(" | ");
         let k: u64 = c[1].parse().unwrap();
         let r = row(&confident, &c[0], k);
-        let episodes = f(r, "plans");
-        let recognition = c[2].split(' ').next().unwrap();
+        let oracle = if c[0] == "eem" {
+            row(&greedy, "eem", k)
+        } else {
+            row(&main, &c[0], k)
+        };
         assert_eq!(
-            recognition,
-            format!("{:.3}", f(r, "recognition_rate")),
+            c[2],
+            format!(
+                "{} ({})",
+                fixed(r, "recognition_rate", 3),
+                fixed(oracle, "recognition_rate", 3)
+            ),
             "{line}"
         );
-        assert_eq!(c[3], format!("{:.3}", f(r, "stops") / episodes), "{line}");
-        let wrong = f(r, "wrong_stops");
-        assert_eq!(
-            c[4],
-            format!("{wrong} ({:.1} %)", 100.0 * wrong / f(r, "stops")),
-            "{line}"
-        );
+        assert_eq!(c[3], format!("{:.3}", f(r, "answered") / f(r, "plans")), "{line}");
+        assert_eq!(c[4], fixed(r, "right", 3), "{line}");
+        let wrong = f(r, "wrong");
         assert_eq!(
             c[5],
+            format!("{wrong} ({:.1} %)", 100.0 * f(r, "wrong_of_answered")),
+            "{line}"
+        );
+        assert_eq!(
+            c[6],
             format!("{:.2} %", 100.0 * f(r, "mean_risk_at_stop")),
             "{line}"
         );
-        assert_eq!(c[7], format!("{:.4}", f(r, "pose_error")), "{line}");
-        assert_eq!(c[8], format!("{:.2}", f(r, "measurements")), "{line}");
-        assert_eq!(c[9], format!("{:.3}", f(r, "cost")), "{line}");
+        assert_eq!(c[7], fixed(r, "pose_error", 4), "{line}");
+        assert_eq!(c[8], fixed(r, "measurements", 2), "{line}");
+        assert_eq!(c[9], fixed(r, "cost", 3), "{line}");
         checked += 1;
     }
     assert!(
         checked >= 6,
         "only {checked} rows found in the calibrated-stop table"
     );
+}
+
+/// The README's no-oracle table (issue 21): every agent, K = 1 and 10, stopping by itself,
+/// from the main job's `results/no-oracle/results.json`.
+#[test]
+fn the_no_oracle_table_is_the_main_jobs() {
+    let readme = read("README.md");
+    let results = json("results/no-oracle/results.json");
+    // Above the fold: before the greedy benchmarks, right after Table 4.
+    let at = readme
+        .find("## Without an oracle: what the instrument answers by itself")
+        .expect("README has the no-oracle section");
+    assert!(at < readme.find("## Greedy benchmarks").unwrap());
+    let mm = |r: &Value, key: &str| {
+        r[key]
+            .as_f64()
+            .map(|x| format!("{:.1}", 1000.0 * x))
+            .unwrap_or_else(|| "–".into())
+    };
+    let mut checked = 0;
+    for c in table_after(&readme, "## Without an oracle: what the instrument answers by itself") {
+        let line = c.join(" | ");
+        let k: u64 = c[1].parse().unwrap();
+        let r = row(&results, &c[0], k);
+        assert_eq!(c[2], fixed(r, "right", 3), "{line}");
+        assert_eq!(
+            c[3],
+            format!("{} ({:.1} %)", f(r, "wrong"), 100.0 * f(r, "wrong_of_answered")),
+            "{line}"
+        );
+        assert_eq!(c[4], fixed(r, "unanswered", 3), "{line}");
+        assert_eq!(c[5], fixed(r, "measurements", 2), "{line}");
+        assert_eq!(c[6], fixed(r, "rotations", 2), "{line}");
+        assert_eq!(c[7], fixed(r, "cost", 3), "{line}");
+        assert_eq!(
+            c[8],
+            format!(
+                "{} / {} / {}",
+                mm(r, "right_position_error"),
+                mm(r, "right_position_error_median"),
+                mm(r, "right_position_error_p95")
+            ),
+            "{line}"
+        );
+        assert_eq!(c[9], fixed(r, "recognition_rate", 3), "{line}");
+        checked += 1;
+    }
+    assert_eq!(checked, 18, "nine agents, K = 1 and 10");
+}
+
+/// The README's frontier table: per agent and K, cost and observed wrong answers at every
+/// `--stop-risk` setting of `results/frontier/frontier.json`.
+#[test]
+fn the_frontier_table_is_results_frontier() {
+    let readme = read("README.md");
+    let fr = json("results/frontier/frontier.json");
+    let risks: Vec<f64> = fr["stop_risks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let at = readme.find("### The risk–cost frontier").expect("frontier section");
+    let rows = table_at(&readme[at..], "", "| agent | K |");
+    let mut checked = 0;
+    for c in rows {
+        let k: u64 = c[1].parse().unwrap();
+        for (i, &p) in risks.iter().enumerate() {
+            let pt = fr["points"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|q| {
+                    q["agent"] == c[0].as_str()
+                        && q["rot_bins"] == k
+                        && (q["stop_risk"].as_f64().unwrap() - p).abs() < 1e-9
+                })
+                .unwrap_or_else(|| panic!("no frontier point {} K = {k} P = {p}", c[0]));
+            let want = format!(
+                "{:.3} / {:.1} %",
+                f(pt, "cost"),
+                100.0 * f(pt, "wrong_of_answered")
+            );
+            assert_eq!(c[2 + i], want, "frontier {} K = {k} P = {p}", c[0]);
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 6, "three agents, K = 1 and 10");
 }
 
 #[test]
@@ -240,7 +339,7 @@ fn the_greedy_confident_table_is_results_greedy_confident() {
     let readme = read("README.md");
     let results = json("results/greedy-confident/results.json");
     let at = readme
-        .find("results/greedy-confident` (11 min) gives")
+        .find("results/greedy-confident` (6 min) gives")
         .unwrap();
     let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| K |");
     assert_eq!(rows.len(), 2, "a K = 1 and a K = 10 row");
@@ -253,11 +352,11 @@ fn the_greedy_confident_table_is_results_greedy_confident() {
             let r = row(&results, agent, k);
             let want = format!(
                 "{} / {} / {} / {} of {}",
-                fixed(r, "recognition_rate", 3),
+                fixed(r, "right", 3),
                 fixed(r, "measurements", 2),
                 fixed(r, "cost", 3),
-                f(r, "wrong_stops"),
-                f(r, "stops")
+                f(r, "wrong"),
+                f(r, "answered")
             );
             assert_eq!(cell, &want, "README greedy-confident, {agent} K = {k}");
         }
