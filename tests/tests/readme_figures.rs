@@ -134,7 +134,11 @@ fn the_calibrated_stop_table_is_results_confident() {
             ),
             "{line}"
         );
-        assert_eq!(c[3], format!("{:.3}", f(r, "answered") / f(r, "plans")), "{line}");
+        assert_eq!(
+            c[3],
+            format!("{:.3}", f(r, "answered") / f(r, "plans")),
+            "{line}"
+        );
         assert_eq!(c[4], fixed(r, "right", 3), "{line}");
         let wrong = f(r, "wrong");
         assert_eq!(
@@ -176,14 +180,21 @@ fn the_no_oracle_table_is_the_main_jobs() {
             .unwrap_or_else(|| "–".into())
     };
     let mut checked = 0;
-    for c in table_after(&readme, "## Without an oracle: what the instrument answers by itself") {
+    for c in table_after(
+        &readme,
+        "## Without an oracle: what the instrument answers by itself",
+    ) {
         let line = c.join(" | ");
         let k: u64 = c[1].parse().unwrap();
         let r = row(&results, &c[0], k);
         assert_eq!(c[2], fixed(r, "right", 3), "{line}");
         assert_eq!(
             c[3],
-            format!("{} ({:.1} %)", f(r, "wrong"), 100.0 * f(r, "wrong_of_answered")),
+            format!(
+                "{} ({:.1} %)",
+                f(r, "wrong"),
+                100.0 * f(r, "wrong_of_answered")
+            ),
             "{line}"
         );
         assert_eq!(c[4], fixed(r, "unanswered", 3), "{line}");
@@ -218,7 +229,9 @@ fn the_frontier_table_is_results_frontier() {
         .iter()
         .map(|v| v.as_f64().unwrap())
         .collect();
-    let at = readme.find("### The risk–cost frontier").expect("frontier section");
+    let at = readme
+        .find("### The risk–cost frontier")
+        .expect("frontier section");
     let rows = table_at(&readme[at..], "", "| agent | K |");
     let mut checked = 0;
     for c in rows {

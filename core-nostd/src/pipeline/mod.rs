@@ -137,6 +137,10 @@ pub struct Pipeline {
     /// step the confident rule and [`Pipeline::finish`] refine the same readings, and on the
     /// instrument one refinement is up to seconds.
     last_refinement: Option<((usize, u32), Refinement)>,
+    /// The last refinements at other belief modes, newest first
+    /// ([`refine::keep_alternate`]): a carried re-fit may start from them when the argmax
+    /// returns to one.
+    alternate_refinements: [Option<Refinement>; refine::ALTERNATE_MODES],
     /// The confident rule's lowest-risk moment so far ([`Pipeline::finish`]).
     best_answer: Option<Answer>,
 }
@@ -179,6 +183,7 @@ impl Pipeline {
             voted: false,
             ready: false,
             last_refinement: None,
+            alternate_refinements: [None; refine::ALTERNATE_MODES],
             best_answer: None,
         }
     }
@@ -213,6 +218,7 @@ impl Pipeline {
         self.plan = plan.clone();
         self.observations.clear();
         self.last_refinement = None;
+        self.alternate_refinements = [None; refine::ALTERNATE_MODES];
         self.best_answer = None;
         self.params = *params;
         self.voted = false;
@@ -275,25 +281,33 @@ impl Pipeline {
         Some(stop)
     }
 
-    /// Brings the kept refinement up to the readings: carried on from the previous
-    /// reading's ([`refine::refine_after`]) when there is one, else from scratch. Past the
-    /// stop gate this runs after every reading; the carry is what keeps a reading's update
-    /// cheap on the instrument (issue 22).
+    /// Brings the kept refinement up to the readings: carried on ([`refine::refine_after`])
+    /// from the last refinement when the belief argmax is still at its mode, or from the
+    /// last one at the argmax's mode among the alternates ([`refine::carry_start`]), else
+    /// from scratch. Past the stop gate this runs after every reading; the carry is what
+    /// keeps a reading's update cheap on the instrument (issue 22).
     fn track_refinement(&mut self) {
         let key = self.refinement_key();
         if self.last_refinement.is_some_and(|(k, _)| k == key) {
             return;
         }
-        let previous = self
-            .last_refinement
-            .filter(|((n, _), _)| n + 1 == self.observations.len())
-            .map(|(_, r)| r);
         let input = self.refine_input(&self.plan);
         let budget = Budget::per_reading(self.params.heading_known());
-        let refined = match previous.filter(|_| budget.carry) {
+        let icp = input.params.icp;
+        let last = self.last_refinement.map(|(_, r)| r);
+        // Carry from the last refinement, or from an earlier one at the argmax's mode.
+        let start = if budget.carry {
+            refine::carry_start(&input, last.as_ref(), &self.alternate_refinements)
+        } else {
+            None
+        };
+        let refined = match start {
             Some(p) => refine::refine_after(&input, &p, &budget),
             None => refine::refine_within(&input, &budget),
         };
+        if let (Some(old), Ok(new)) = (last, &refined) {
+            refine::keep_alternate(&mut self.alternate_refinements, &old, new, &icp);
+        }
         self.last_refinement = refined.ok().map(|r| (key, r));
     }
 

@@ -309,6 +309,10 @@ pub struct Budget {
     /// its many readings, so its ICPs converge in a few iterations or oscillate; each
     /// iteration there costs a correspondence per reading.
     pub long_icp_iterations: u16,
+    /// Rounds of the winner's final annealing past [`Budget::full_readings`] readings (at
+    /// most [`Budget::final_rounds`]): a fresh search that late is one hypothesis (no
+    /// leave-outs), and its final annealing was most of a worst-case update.
+    pub long_final_rounds: u16,
 }
 
 impl Budget {
@@ -326,6 +330,7 @@ impl Budget {
         carry: false,
         full_readings: u8::MAX,
         long_icp_iterations: u16::MAX,
+        long_final_rounds: u16::MAX,
     };
     /// Leave-outs only for the worst [`SCREEN_CANDIDATES`] unexplained readings, a short
     /// sweep, capped ICPs and a short final annealing from the screened winner: most
@@ -340,6 +345,7 @@ impl Budget {
         carry: true,
         full_readings: LEAVE_OUT_MAX_READINGS as u8,
         long_icp_iterations: 30,
+        long_final_rounds: 10,
     };
 
     /// What the refinement after each reading past the stop gate spends (the calibrated
@@ -357,11 +363,13 @@ impl Budget {
             Budget {
                 carry: false,
                 long_icp_iterations: PER_READING_LONG_ICP_ITERATIONS,
+                long_final_rounds: PER_READING_LONG_FINAL_ROUNDS,
                 ..Budget::SCREENED
             }
         } else {
             Budget {
                 long_icp_iterations: PER_READING_LONG_ICP_ITERATIONS,
+                long_final_rounds: PER_READING_LONG_FINAL_ROUNDS,
                 ..Budget::SCREENED
             }
         }
@@ -433,6 +441,10 @@ impl Budget {
 /// ICP iterations per annealing round of the per-reading refinement past
 /// [`Budget::full_readings`] readings ([`Budget::per_reading`]).
 pub const PER_READING_LONG_ICP_ITERATIONS: u16 = 12;
+
+/// Final annealing rounds of the per-reading refinement past [`Budget::full_readings`]
+/// readings ([`Budget::per_reading`]).
+pub const PER_READING_LONG_FINAL_ROUNDS: u16 = 2;
 
 /// Single leave-outs the screened search tries: the worst unexplained readings.
 pub const SCREEN_CANDIDATES: usize = 2;
@@ -540,8 +552,13 @@ pub fn refine_within(
     budget: &Budget,
 ) -> Result<Refinement, RegistrationError> {
     let n = input.obs.len();
+    let final_rounds = if n > budget.full_readings as usize {
+        budget.final_rounds.min(budget.long_final_rounds)
+    } else {
+        budget.final_rounds
+    };
     let input = RefineInput {
-        params: budget.cap(&input.params, budget.final_rounds, n),
+        params: budget.cap(&input.params, final_rounds, n),
         screen: budget.cap(&input.screen, u16::MAX, n),
         ..*input
     };
@@ -635,6 +652,67 @@ pub fn refine_after(
         }
         None => refine_within(input, budget),
     }
+}
+
+/// Refinements of other belief modes an episode keeps ([`keep_alternate`]): when the
+/// argmax flips between two or three near-twins of a room (a near-symmetric plan the
+/// symmetry test does not call symmetric), each return re-fits from that mode's last
+/// refinement instead of searching afresh. Issue 22: on plan 1000002 (K = 10, int8 learnt
+/// policy, calibrated stop) the argmax alternated between two cells 180° apart from the
+/// eighth reading on, and every flip was a fresh search, the worst update 55.3 M
+/// instructions at 32 readings. 3 × 60 bytes of RAM.
+pub const ALTERNATE_MODES: usize = 3;
+
+/// The refinement a carried re-fit ([`refine_after`]) starts from: `last` when its pose
+/// lies in the trust region of the belief argmax, else the newest of `alternates` that does;
+/// `None` when none does (search afresh).
+pub fn carry_start(
+    input: &RefineInput<'_>,
+    last: Option<&Refinement>,
+    alternates: &[Option<Refinement>],
+) -> Option<Refinement> {
+    let argmax = input.localizer.argmax()?;
+    let centre = input.localizer.grid().pose_of(argmax);
+    let fits = |r: &&Refinement| {
+        registration::in_trust_region(&r.registration.pose, &centre, &input.params.icp)
+    };
+    last.filter(fits)
+        .or_else(|| alternates.iter().flatten().find(fits))
+        .copied()
+}
+
+/// Books `old`, the refinement `new` replaces as the episode's last, among `alternates`
+/// (newest first) when the two lie at different modes (neither pose within the other's
+/// trust region): it takes the place of the alternate at its own mode, else of the oldest.
+/// An alternate at `new`'s mode is dropped either way (`new` is that mode's refinement now).
+pub fn keep_alternate(
+    alternates: &mut [Option<Refinement>],
+    old: &Refinement,
+    new: &Refinement,
+    icp: &IcpParams,
+) {
+    let same = |a: &Refinement, b: &Refinement| {
+        registration::in_trust_region(&a.registration.pose, &b.registration.pose, icp)
+    };
+    for slot in alternates.iter_mut() {
+        if slot.as_ref().is_some_and(|a| same(a, new)) {
+            *slot = None;
+        }
+    }
+    if alternates.is_empty() || same(old, new) {
+        return;
+    }
+    // Where `old` goes: its own mode's slot, else the last (oldest) one; the slots before
+    // it move down by one, so the newest is first.
+    let at = alternates
+        .iter()
+        .position(|a| a.as_ref().is_some_and(|a| same(a, old)))
+        .or_else(|| alternates.iter().position(Option::is_none))
+        .unwrap_or(alternates.len() - 1);
+    for i in (1..=at).rev() {
+        alternates[i] = alternates[i - 1];
+    }
+    alternates[0] = Some(*old);
 }
 
 /// The full annealing from the screened winner `best`; the better of the two by score.
@@ -758,6 +836,65 @@ mod tests {
         assert_eq!(b.perturbations(4, 200), 1);
         assert_eq!(Budget::EXHAUSTIVE.perturbations(16, 200), 16);
         assert_eq!(Budget::end_of_episode(false).perturbations(16, 40), 4);
+    }
+
+    fn at(x: f32, y: f32, theta: f32) -> Refinement {
+        Refinement {
+            registration: Registration {
+                pose: Pose2::new(x, y, theta),
+                error: 0.0,
+                score: 0.0,
+                inliers: 0,
+                relaxed: 0,
+                iterations: 0,
+                rounds: 0,
+                converged: true,
+            },
+            fit: RangeFit {
+                log_likelihood: 0.0,
+                explained: 0,
+                bearings: 0,
+                explained_bearings: 0,
+            },
+            log_prior: 0.0,
+            excluded: [NOT_EXCLUDED; MAX_EXCLUDED],
+            hypotheses: 1,
+        }
+    }
+
+    /// The alternates keep one refinement per mode, newest first, the oldest dropped
+    /// when full; the mode the episode is at now is never among them.
+    #[test]
+    fn alternates_keep_one_refinement_per_mode() {
+        let icp = IcpParams {
+            trust_translation: 0.5,
+            trust_rotation: 0.3,
+            ..IcpParams::default()
+        };
+        let (a, a2) = (at(0.0, 0.0, 0.0), at(0.1, 0.0, 0.05));
+        let (b, c, d) = (at(3.0, 0.0, 3.1), at(0.0, 3.0, 1.5), at(-3.0, 0.0, -1.5));
+        let mut alt = [None; ALTERNATE_MODES];
+        // Same mode: nothing kept.
+        keep_alternate(&mut alt, &a, &a2, &icp);
+        assert_eq!(alt, [None; ALTERNATE_MODES]);
+        // a → b: a kept; b → a2 (back to a's mode): b kept, a's old entry dropped.
+        keep_alternate(&mut alt, &a, &b, &icp);
+        assert_eq!(alt[0], Some(a));
+        keep_alternate(&mut alt, &b, &a2, &icp);
+        assert_eq!(alt, [Some(b), None, None]);
+        // a2 → c → d → a: b, a2, c kept newest first, then the oldest (b) drops for d.
+        keep_alternate(&mut alt, &a2, &c, &icp);
+        keep_alternate(&mut alt, &c, &d, &icp);
+        assert_eq!(alt, [Some(c), Some(a2), Some(b)]);
+        keep_alternate(&mut alt, &d, &a, &icp);
+        assert_eq!(
+            alt,
+            [Some(d), Some(c), Some(b)],
+            "a2's mode is the current one"
+        );
+        let e = at(3.0, 3.0, 0.0);
+        keep_alternate(&mut alt, &a, &e, &icp);
+        assert_eq!(alt, [Some(a), Some(d), Some(c)], "the oldest (b) dropped");
     }
 
     #[test]
