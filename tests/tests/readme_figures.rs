@@ -352,7 +352,7 @@ fn the_greedy_confident_table_is_results_greedy_confident() {
     let readme = read("README.md");
     let results = json("results/greedy-confident/results.json");
     let at = readme
-        .find("results/greedy-confident` (6 min) gives")
+        .find("results/greedy-confident` (7 min) gives")
         .unwrap();
     let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| K |");
     assert_eq!(rows.len(), 2, "a K = 1 and a K = 10 row");
