@@ -168,10 +168,12 @@ fn setup() -> Result<()> {
         } else {
             ""
         };
+        // The installer's chatter goes to stderr: a step whose stdout is its artifact
+        // (`mcu-bench > results/mcu-bench/….md`) once got apt's lines in its table.
         run(Command::new("sh").args([
             "-c",
             &format!(
-                "{sudo}apt-get update -qq && DEBIAN_FRONTEND=noninteractive {sudo}apt-get install -y -qq {}",
+                "({sudo}apt-get update -qq && DEBIAN_FRONTEND=noninteractive {sudo}apt-get install -y -qq {}) 1>&2",
                 missing.join(" ")
             ),
         ]))?;
