@@ -9,6 +9,7 @@ use super::{Answer, Determination, HeadingHint};
 use crate::episode::{run_episode, EpisodeSpec, Termination};
 use crate::world::planfile::NamedPlan;
 use activesense_core::episode::AgentKind;
+use activesense_core::registration::pose_distance::{PoseErrors, Tolerance};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -57,7 +58,7 @@ pub struct CoverageReport {
     pub heading_estimated: u32,
     /// … all estimated components within 2σ.
     pub within_2sigma_all: u32,
-    /// Answers with a precision whose truth is among the candidates (within 5 cm and 1°):
+    /// Answers with a precision whose truth is among the candidates (within 5 cm and 0.5°, `Tolerance::SURVEYOR`):
     /// the σ describe these; a wrong answer is what the stated risk is for.
     pub right_with_precision: u32,
     /// … of those, every estimated component within 2σ.
@@ -67,7 +68,7 @@ pub struct CoverageReport {
     /// Answers listing more than one candidate.
     pub ambiguous: u32,
     /// Answers where the truth is one of the candidates (position within 5 cm, heading
-    /// within 1°).
+    /// within 0.5°, `Tolerance::SURVEYOR`).
     pub truth_among_candidates: u32,
     /// Of the ambiguous answers, those whose first candidate is not the true one.
     pub ambiguous_first_wrong: u32,
@@ -161,7 +162,13 @@ pub fn coverage(run: &CoverageRun) -> CoverageReport {
         }
         let Some(t) = &a.truth else { continue };
         let e = t.nearest_errors;
-        if (e[0] * e[0] + e[1] * e[1]).sqrt() * a.metres_per_unit < 0.05 && e[2].abs() < 1.0 {
+        // Right: the candidate nearest the truth within the surveyor's tolerance, the
+        // criterion of the no-oracle table (`Tolerance::SURVEYOR`).
+        let right = Tolerance::SURVEYOR.admits(&PoseErrors {
+            position: ((e[0] * e[0] + e[1] * e[1]).sqrt() * a.metres_per_unit) as f32,
+            heading: e[2].abs().to_radians() as f32,
+        });
+        if right {
             r.truth_among_candidates += 1;
         }
         if a.ambiguous && t.nearest != 0 {
@@ -190,7 +197,7 @@ pub fn coverage(run: &CoverageRun) -> CoverageReport {
             ok
         };
         r.within_2sigma_all += (ok_e && ok_n && ok_h) as u32;
-        if (e[0] * e[0] + e[1] * e[1]).sqrt() * a.metres_per_unit < 0.05 && e[2].abs() < 1.0 {
+        if right {
             r.right_with_precision += 1;
             r.right_within_2sigma_all += (ok_e && ok_n && ok_h) as u32;
             r.right_within_2sigma[0] += ok_e as u32;
