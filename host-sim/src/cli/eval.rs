@@ -193,21 +193,17 @@ pub fn run(a: EvalArgs) -> Result<()> {
         }
         let t0 = std::time::Instant::now();
         let f = crate::eval::frontier::run(&opts, &a.stop_risks);
-        std::fs::create_dir_all(&a.out)
-            .with_context(|| format!("cannot create {}", a.out.display()))?;
         let md = crate::eval::frontier::markdown(&f, &command);
-        for (name, body) in [
-            ("frontier.json", serde_json::to_string_pretty(&f)? + "\n"),
-            ("frontier.md", md.clone()),
-            ("frontier.svg", crate::eval::frontier::svg(&f)),
-        ] {
-            let p = a.out.join(name);
-            std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
-            println!("wrote {}", p.display());
-        }
-        print!("{md}");
-        println!("{:.1} s wall time", t0.elapsed().as_secs_f64());
-        return Ok(());
+        return write_analysis(
+            &a.out,
+            [
+                ("frontier.json", serde_json::to_string_pretty(&f)? + "\n"),
+                ("frontier.md", md.clone()),
+                ("frontier.svg", crate::eval::frontier::svg(&f)),
+            ],
+            &md,
+            t0,
+        );
     }
     if let Some(extra) = a.extra_measurements {
         eprintln!(
@@ -218,21 +214,17 @@ pub fn run(a: EvalArgs) -> Result<()> {
         );
         let t0 = std::time::Instant::now();
         let report = experiments::extra_measurements(&opts, extra);
-        std::fs::create_dir_all(&a.out)
-            .with_context(|| format!("cannot create {}", a.out.display()))?;
         let md = experiments::extra_markdown(&report, &command);
-        for (name, body) in [
-            ("extra.json", serde_json::to_string_pretty(&report)? + "\n"),
-            ("extra.md", md.clone()),
-            ("extra.svg", experiments::extra_svg(&report)),
-        ] {
-            let p = a.out.join(name);
-            std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
-            println!("wrote {}", p.display());
-        }
-        print!("{md}");
-        println!("{:.1} s wall time", t0.elapsed().as_secs_f64());
-        return Ok(());
+        return write_analysis(
+            &a.out,
+            [
+                ("extra.json", serde_json::to_string_pretty(&report)? + "\n"),
+                ("extra.md", md.clone()),
+                ("extra.svg", experiments::extra_svg(&report)),
+            ],
+            &md,
+            t0,
+        );
     }
     eprintln!(
         "evaluating {} agent(s) x {} rotation setting(s) x {} plans = {} episodes",
@@ -259,6 +251,25 @@ pub fn run(a: EvalArgs) -> Result<()> {
         let files = report::write_outputs(&report, &timing, &dir, &command)?;
         print_summary(&report, &timing, &files);
     }
+    Ok(())
+}
+
+/// Writes an analysis run's files (`frontier.*`, `extra.*`) into `out`, then prints its
+/// markdown and the wall time since `t0`.
+fn write_analysis(
+    out: &std::path::Path,
+    files: [(&str, String); 3],
+    md: &str,
+    t0: std::time::Instant,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    for (name, body) in files {
+        let p = out.join(name);
+        std::fs::write(&p, body).with_context(|| format!("cannot write {}", p.display()))?;
+        println!("wrote {}", p.display());
+    }
+    print!("{md}");
+    println!("{:.1} s wall time", t0.elapsed().as_secs_f64());
     Ok(())
 }
 
