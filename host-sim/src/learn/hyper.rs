@@ -7,12 +7,12 @@
 //! stores it in the policy file's metadata (`hyper_params`).
 
 use super::agent::InputMask;
-use activesense_core::episode::AgentKind;
+use activesense_core::episode::{AgentKind, Termination};
 use clap::{Args, FromArgMatches};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 
-/// Every hyper-parameter of a training run. The first eleven are `activesense train` flags
+/// Every hyper-parameter of a training run. The first thirteen are `activesense train` flags
 /// (doc comment = help text); the others are fixed.
 #[derive(Args, Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HyperParams {
@@ -54,6 +54,17 @@ pub struct HyperParams {
     /// without the final-registration-error term).
     #[arg(long, default_value_t = 1.0)]
     pub registration_reward: f32,
+    /// What ends a training episode: `oracle` (the paper's: the first coarse success) or
+    /// `confident` (the calibrated stop an instrument uses; the answer is then rewarded
+    /// +1 when right within the surveyor's tolerance and −`--wrong-penalty` when wrong).
+    #[arg(long, default_value = "oracle", value_parser = parse_termination)]
+    #[serde(default = "oracle")]
+    pub termination: Termination,
+    /// Reward: −this for a wrong answer under `--termination confident` (W of the
+    /// right/wrong reward; the oracle stop never answers wrongly).
+    #[arg(long, default_value_t = 2.0)]
+    #[serde(default = "default_wrong_penalty")]
+    pub wrong_penalty: f32,
 
     // Fixed: not on the command line.
     /// Discount γ (eq. 1).
@@ -98,6 +109,24 @@ pub struct HyperParams {
     /// Updates between checkpoints.
     #[arg(skip = 100u64)]
     pub checkpoint_every: u64,
+}
+
+fn oracle() -> Termination {
+    Termination::Oracle
+}
+
+fn default_wrong_penalty() -> f32 {
+    2.0
+}
+
+fn parse_termination(s: &str) -> Result<Termination, String> {
+    match s {
+        "oracle" => Ok(Termination::Oracle),
+        "confident" => Ok(Termination::Confident),
+        _ => Err(format!(
+            "unknown training termination '{s}' (expected oracle or confident)"
+        )),
+    }
 }
 
 fn parse_inputs(s: &str) -> Result<InputMask, String> {
@@ -153,6 +182,8 @@ mod tests {
             log_every: 10,
             inputs: InputMask::Full,
             registration_reward: 1.0,
+            termination: Termination::Oracle,
+            wrong_penalty: 2.0,
             gamma: 0.99,
             gae_lambda: 0.95,
             imitation_learning_rate: 1e-3,

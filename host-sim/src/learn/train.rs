@@ -32,7 +32,7 @@ use super::agent::{action_index, masked_features, shape_for, ACTIONS};
 use super::file;
 pub use super::hyper::HyperParams;
 use super::net::{self, Adam, BatchCache, NetShape, PolicyNet};
-use crate::episode::{score, start_episode, EpisodeSpec, Termination};
+use crate::episode::{score, start_episode, EpisodeSpec};
 use crate::world::plans;
 use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
@@ -42,6 +42,7 @@ use activesense_core::pipeline::runner::EpisodeRunner;
 use activesense_core::pipeline::Stop;
 use activesense_core::policy::BaselineAgent;
 use activesense_core::policy::{Policy, BELIEF_PLANE, SIDE_FEATURES};
+use activesense_core::registration::pose_distance::Tolerance;
 use activesense_core::{FloorPlan, Pose2};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -59,12 +60,25 @@ pub fn step_reward(action: Action, bonus: f32) -> f32 {
     -costs.of(action) + bonus
 }
 
-/// The end-of-episode reward: success/limit and the clipped quadratic registration term.
-pub fn final_reward(hp: &HyperParams, success: bool, pose_error: Option<f32>) -> f32 {
-    let outcome = if success {
-        hp.success_reward
-    } else {
-        -hp.limit_penalty
+/// How a training episode ended, for the end-of-episode reward.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ending {
+    /// Oracle stop: coarse success. Calibrated stop: an answer within the surveyor's
+    /// tolerance ([`Tolerance::SURVEYOR`]).
+    Right,
+    /// Calibrated stop only: the instrument answered, and the answer is outside the tolerance.
+    Wrong,
+    /// The action limit.
+    Limit,
+}
+
+/// The end-of-episode reward: right (+`success_reward`), wrong (−`wrong_penalty`) or the
+/// action limit (−`limit_penalty`), plus the clipped quadratic registration term.
+pub fn final_reward(hp: &HyperParams, ending: Ending, pose_error: Option<f32>) -> f32 {
+    let outcome = match ending {
+        Ending::Right => hp.success_reward,
+        Ending::Wrong => -hp.wrong_penalty,
+        Ending::Limit => -hp.limit_penalty,
     };
     let reg = pose_error
         .map(|e| {
@@ -143,7 +157,7 @@ impl Env {
                 ..EpisodeConfig::default()
             },
             sensor: SensorModel::default(),
-            termination: Termination::Oracle,
+            termination: hp.termination,
             user_plan: None,
         }
     }
@@ -183,10 +197,22 @@ impl Env {
             self.ret += r;
             return (r, None);
         }
-        let success = self.runner.stop() == Some(Stop::CoarseSuccess);
         let result = self.runner.finish(&self.plan);
         let outcome = score(&self.plan, &self.truth, &result);
-        r += final_reward(hp, success, outcome.pose_error);
+        let ending = match self.runner.stop() {
+            Some(Stop::CoarseSuccess) => Ending::Right,
+            Some(Stop::Confident)
+                if outcome
+                    .errors
+                    .is_some_and(|e| Tolerance::SURVEYOR.admits(&e)) =>
+            {
+                Ending::Right
+            }
+            Some(Stop::Confident) => Ending::Wrong,
+            _ => Ending::Limit,
+        };
+        let success = ending == Ending::Right;
+        r += final_reward(hp, ending, outcome.pose_error);
         self.ret += r;
         let s = self.runner.state();
         let done = Finished {
@@ -793,6 +819,27 @@ mod tests {
     }
 
     #[test]
+    fn confident_training_raises_the_no_oracle_return() {
+        // The no-oracle episode (the calibrated stop ends it; right answers +1, wrong ones
+        // −W): a short run from a fixed seed must beat the untrained network's return on
+        // fixed episodes that end the same way.
+        let hp = HyperParams {
+            num_envs: 16,
+            segment_len: 16,
+            termination: activesense_core::episode::Termination::Confident,
+            ..tiny(1, 220, 200)
+        };
+        let untrained = PolicyNet::new(shape_for(1), hp.seed);
+        let before = greedy_return(&hp, &untrained);
+        let out = train(&hp, &RunOptions::default()).unwrap();
+        let after = greedy_return(&hp, &out.net);
+        assert!(
+            after > before + 0.5,
+            "no-oracle return before {before:.3}, after {after:.3}"
+        );
+    }
+
+    #[test]
     fn gae_matches_a_hand_computed_case() {
         // One environment, three steps, the second ends its episode.
         let (adv, ret) = gae(
@@ -820,10 +867,11 @@ mod tests {
         let hp = HyperParams::defaults(1);
         assert!((step_reward(Action::Measure, 0.0) + 0.05).abs() < 1e-7);
         assert!((step_reward(Action::RotateLeft, 0.0) + 0.005).abs() < 1e-7);
-        assert_eq!(final_reward(&hp, true, Some(0.0)), 2.0);
-        assert_eq!(final_reward(&hp, true, Some(0.5)), 1.0);
-        assert!((final_reward(&hp, true, Some(0.05)) - 1.75).abs() < 1e-6);
-        assert_eq!(final_reward(&hp, false, None), -1.0);
+        assert_eq!(final_reward(&hp, Ending::Right, Some(0.0)), 2.0);
+        assert_eq!(final_reward(&hp, Ending::Right, Some(0.5)), 1.0);
+        assert!((final_reward(&hp, Ending::Right, Some(0.05)) - 1.75).abs() < 1e-6);
+        assert_eq!(final_reward(&hp, Ending::Limit, None), -1.0);
+        assert_eq!(final_reward(&hp, Ending::Wrong, Some(0.5)), -2.0);
         let visits = [0u64, 1000, 3000];
         assert!((bonus(&hp, &visits, 0) - hp.exploration_bonus).abs() < 1e-9);
         assert!((bonus(&hp, &visits, 1) - hp.exploration_bonus / 2.0).abs() < 1e-9);
