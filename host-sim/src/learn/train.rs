@@ -797,13 +797,14 @@ mod tests {
         total / n as f32
     }
 
-    #[test]
-    fn smoke_training_raises_the_return() {
-        // The CI's short training run: 220 updates (200 of them imitating heuristic-1) from a
-        // fixed seed must beat the untrained network's return on fixed episodes.
+    /// Trains `hp` (K = 1, 220 updates, 200 of them imitating heuristic-1) from its fixed seed
+    /// and checks that it beats the untrained network's return on fixed episodes, which end
+    /// by `hp.termination` as the training episodes do.
+    fn short_run_raises_the_return(termination: activesense_core::episode::Termination) {
         let hp = HyperParams {
             num_envs: 16,
             segment_len: 16,
+            termination,
             ..tiny(1, 220, 200)
         };
         let untrained = PolicyNet::new(shape_for(1), hp.seed);
@@ -812,31 +813,24 @@ mod tests {
         let after = greedy_return(&hp, &out.net);
         assert!(
             after > before + 0.5,
-            "return before {before:.3}, after {after:.3}"
+            "{} return before {before:.3}, after {after:.3}",
+            termination.name()
         );
         assert_eq!(out.updates, 220);
         assert!(!out.log.is_empty());
     }
 
     #[test]
+    fn smoke_training_raises_the_return() {
+        // The CI's short training run, with the paper's oracle stop.
+        short_run_raises_the_return(activesense_core::episode::Termination::Oracle);
+    }
+
+    #[test]
     fn confident_training_raises_the_no_oracle_return() {
-        // The no-oracle episode (the calibrated stop ends it; right answers +1, wrong ones
-        // −W): a short run from a fixed seed must beat the untrained network's return on
-        // fixed episodes that end the same way.
-        let hp = HyperParams {
-            num_envs: 16,
-            segment_len: 16,
-            termination: activesense_core::episode::Termination::Confident,
-            ..tiny(1, 220, 200)
-        };
-        let untrained = PolicyNet::new(shape_for(1), hp.seed);
-        let before = greedy_return(&hp, &untrained);
-        let out = train(&hp, &RunOptions::default()).unwrap();
-        let after = greedy_return(&hp, &out.net);
-        assert!(
-            after > before + 0.5,
-            "no-oracle return before {before:.3}, after {after:.3}"
-        );
+        // The no-oracle episode: the calibrated stop ends it, right answers earn +1 and
+        // wrong ones −W.
+        short_run_raises_the_return(activesense_core::episode::Termination::Confident);
     }
 
     #[test]
