@@ -62,7 +62,7 @@ pub struct HyperParams {
     pub termination: Termination,
     /// Reward: −this for a wrong answer under `--termination confident` (W of the
     /// right/wrong reward; the oracle stop never answers wrongly).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = default_wrong_penalty())]
     #[serde(default = "default_wrong_penalty")]
     pub wrong_penalty: f32,
 
@@ -115,17 +115,19 @@ fn oracle() -> Termination {
     Termination::Oracle
 }
 
+/// The `--wrong-penalty` default, also used for policy files written before the flag.
 fn default_wrong_penalty() -> f32 {
     2.0
 }
 
+/// The episode's termination parser, less `action-limit` (an episode that never stops
+/// teaches no stop).
 fn parse_termination(s: &str) -> Result<Termination, String> {
-    match s {
-        "oracle" => Ok(Termination::Oracle),
-        "confident" => Ok(Termination::Confident),
-        _ => Err(format!(
-            "unknown training termination '{s}' (expected oracle or confident)"
-        )),
+    match crate::episode::parse_termination(s)? {
+        Termination::ActionLimit => {
+            Err("a training episode ends by `oracle` or `confident`, not `action-limit`".into())
+        }
+        t => Ok(t),
     }
 }
 

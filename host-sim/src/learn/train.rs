@@ -8,7 +8,9 @@
 //! *training* seeds (`plans::TRAIN_SEEDS`, never the test range) with an
 //! [`EpisodeRunner`]: the same core loop the evaluation and the instrument run, so the
 //! features the network trains on are exactly those it will see. Episodes end on coarse
-//! success (oracle termination, §4.2's first experiment) or at the action limit.
+//! success (oracle termination, §4.2's first experiment; the default), or with
+//! `--termination confident` when the calibrated stop answers (right or wrong by
+//! `Tolerance::SURVEYOR`), or at the action limit.
 //!
 //! **Reward** (§4.2; `docs/LEARNING.md` has the formula):
 //! `r_t = −c(a_t) + b(t)` for every action, plus at the end of the episode
