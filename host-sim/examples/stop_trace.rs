@@ -82,8 +82,9 @@ fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
     (points, min_readings)
 }
 
-/// What the pipeline answers for one trace under stop risk `p`: the stop, else the
-/// lowest-risk moment when the end is riskier or has no estimate, else the end.
+/// What the pipeline answers for one trace under the threshold `p` on the estimate (the
+/// model's for a stated risk): the stop, else the lowest-risk moment when the end is
+/// riskier or has no estimate, else the end.
 fn answer<'a>(eligible: &[&'a Point], p: f32) -> Option<&'a Point> {
     if let Some(stop) = eligible.iter().find(|q| q.risk.is_some_and(|r| r < p)) {
         return Some(stop);
@@ -146,7 +147,10 @@ fn main() {
     let (mut gap, mut unestimated) = (0, 0);
     for (t, m) in &traces {
         let eligible: Vec<&Point> = t.iter().filter(|q| q.readings >= *m).collect();
-        if !eligible.iter().any(|q| q.right) || answer(&eligible, 0.01).is_none_or(|a| a.right) {
+        if !eligible.iter().any(|q| q.right)
+            || answer(&eligible, StopModel::for_rot_bins(rot_bins).threshold(0.01))
+                .is_none_or(|a| a.right)
+        {
             continue;
         }
         gap += 1;
@@ -157,7 +161,8 @@ fn main() {
     );
     println!("| P | stopped | wrong stops | right, last reading | right, lowest-risk moment | same moments scored by the argmax's cell |");
     println!("|---|---|---|---|---|---|");
-    for p in [0.005f32, 0.01, 0.02, 0.03, 0.05, 0.1] {
+    for stated in [0.005f32, 0.01, 0.02, 0.03, 0.05, 0.1] {
+        let p = StopModel::for_rot_bins(rot_bins).threshold(stated);
         let (mut stops, mut wrong, mut last, mut lowest, mut argmax) = (0, 0, 0, 0, 0);
         for (t, m) in &traces {
             let eligible: Vec<&Point> = t.iter().filter(|q| q.readings >= *m).collect();
@@ -172,7 +177,7 @@ fn main() {
             argmax += usize::from(answered.is_some_and(|q| q.argmax_right));
         }
         println!(
-            "| {p} | {stops} | {wrong} | {:.3} | {:.3} | {:.3} |",
+            "| {stated} | {stops} | {wrong} | {:.3} | {:.3} | {:.3} |",
             last as f32 / n,
             lowest as f32 / n,
             argmax as f32 / n

@@ -19,7 +19,7 @@ use crate::learn::agent::{run_agent_episode_observed, Policies};
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::registration::pose_distance::PoseDistance;
-use activesense_core::stop::{StopFeatures, StopModel, FEATURES};
+use activesense_core::stop::{StopFeatures, StopModel, FEATURES, STATED_RISKS};
 use clap::Args;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -47,6 +47,13 @@ pub struct CalibrateArgs {
     /// Action limit of the calibration episodes.
     #[arg(long, default_value_t = 100)]
     pub max_actions: u16,
+    /// Agents whose fitting episodes set the threshold table (the stated risk → threshold
+    /// map, `StopModel::thresholds`; default: every agent of --agents). Each must be among
+    /// --agents. Pooled by default: the table must not depend on a policy trained against
+    /// the stop it belongs to (`docs/LEARNING.md`), and one agent's 500 fitting episodes
+    /// leave its rare wrong stops too few to place a threshold by.
+    #[arg(long)]
+    pub threshold_agents: Option<String>,
     /// Ridge (L2) penalty on the weights.
     #[arg(long, default_value_t = 1e-3)]
     pub ridge: f64,
@@ -227,18 +234,21 @@ pub struct HeldOut {
     /// Reliability per bin of the estimated risk `[0, .005, .01, .02, .05, .1, .2, .5, 1]`:
     /// (samples, mean estimated risk, observed wrong rate).
     pub reliability: Vec<(usize, f64, f64)>,
-    /// For each stop risk P in [`STOP_RISKS`]: (episodes that stopped, fraction of those
-    /// that stopped wrongly).
-    pub first_crossing: Vec<(f64, usize, f64)>,
+    /// For each stated risk P of [`STATED_RISKS`], on the held-out episodes of the
+    /// threshold agents: (P, the model's threshold for it, episodes that stopped at a first
+    /// crossing of it, fraction of those that stopped wrongly, mean readings at the stop).
+    pub first_crossing: Vec<(f64, f64, usize, f64, f64)>,
     /// Held-out episodes.
     pub episodes: usize,
 }
 
-/// The stop risks the held-out check applies.
-pub const STOP_RISKS: [f64; 4] = [0.005, 0.01, 0.02, 0.05];
 const RISK_BINS: [f64; 9] = [0.0, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0001];
 
-fn held_out(model: &StopModel, episodes: &[&EpisodeSamples]) -> HeldOut {
+fn held_out(
+    model: &StopModel,
+    episodes: &[&EpisodeSamples],
+    threshold_episodes: &[&EpisodeSamples],
+) -> HeldOut {
     let mut bins = vec![(0usize, 0.0f64, 0usize); RISK_BINS.len() - 1];
     let mut n = 0;
     let mut wrong = 0;
@@ -254,16 +264,14 @@ fn held_out(model: &StopModel, episodes: &[&EpisodeSamples]) -> HeldOut {
         n += 1;
         wrong += s.wrong as usize;
     }
-    let first_crossing = STOP_RISKS
+    let first_crossing = STATED_RISKS
         .iter()
         .map(|&p| {
-            let stops: Vec<bool> = episodes
-                .iter()
-                .filter_map(|e| e.iter().find(|s| (model.risk(&s.features) as f64) < p))
-                .map(|s| s.wrong)
-                .collect();
-            let bad = stops.iter().filter(|&&w| w).count();
-            (p, stops.len(), bad as f64 / stops.len().max(1) as f64)
+            let t = model.threshold(p);
+            let c = first_crossings(model, threshold_episodes, t);
+            // Through the shortest decimal of the f32, so the report says 0.001, not 0.0010000000474974513.
+            let p64 = format!("{p}").parse().unwrap_or(p as f64);
+            (p64, t as f64, c.stops, c.wrong_rate(), c.mean_readings())
         })
         .collect();
     HeldOut {
@@ -276,6 +284,82 @@ fn held_out(model: &StopModel, episodes: &[&EpisodeSamples]) -> HeldOut {
         first_crossing,
         episodes: episodes.len(),
     }
+}
+
+/// What stopping at the first decision point whose estimate is below a threshold does.
+struct Crossings {
+    stops: usize,
+    wrong: usize,
+    readings: usize,
+}
+
+impl Crossings {
+    fn wrong_rate(&self) -> f64 {
+        self.wrong as f64 / self.stops.max(1) as f64
+    }
+    fn mean_readings(&self) -> f64 {
+        self.readings as f64 / self.stops.max(1) as f64
+    }
+}
+
+/// The first crossings of `threshold` in `episodes` (readings counted with repeats).
+fn first_crossings(model: &StopModel, episodes: &[&EpisodeSamples], threshold: f32) -> Crossings {
+    let mut c = Crossings {
+        stops: 0,
+        wrong: 0,
+        readings: 0,
+    };
+    for s in episodes
+        .iter()
+        .filter_map(|e| e.iter().find(|s| model.risk(&s.features) < threshold))
+    {
+        c.stops += 1;
+        c.wrong += s.wrong as usize;
+        c.readings += (s.features.readings + s.features.repeats) as usize;
+    }
+    c
+}
+
+/// Thresholds on the estimate for candidate searches: 400 steps, log-spaced over
+/// `[1e-5, 0.9]`.
+fn candidate_thresholds() -> impl Iterator<Item = f32> {
+    (0..400).map(|i| (1e-5f64 * (0.9f64 / 1e-5).powf(i as f64 / 399.0)) as f32)
+}
+
+/// The threshold table of `model` ([`StopModel::thresholds`]) from the fitting episodes:
+/// for each stated risk P, the largest candidate threshold such that it and every smaller
+/// one answered wrongly at first crossing in at most a fraction P of the episodes that
+/// stopped. A stated risk no threshold meets gets the smallest candidate.
+pub fn threshold_table(
+    model: &StopModel,
+    episodes: &[&EpisodeSamples],
+) -> [f32; STATED_RISKS.len()] {
+    // The running maximum of the wrong rate over ever larger thresholds.
+    let mut envelope = 0.0f64;
+    let rates: Vec<(f32, f64)> = candidate_thresholds()
+        .map(|t| {
+            envelope = envelope.max(first_crossings(model, episodes, t).wrong_rate());
+            (t, envelope)
+        })
+        .collect();
+    STATED_RISKS.map(|p| {
+        rates
+            .iter()
+            .take_while(|&&(_, w)| w <= p as f64)
+            .last()
+            .map_or(rates[0].0, |&(t, _)| t)
+    })
+}
+
+/// The episodes of `set` (index, samples) whose index passes `keep`.
+fn episodes_where<'a>(
+    set: &[(usize, &'a EpisodeSamples)],
+    keep: impl Fn(usize) -> bool,
+) -> Vec<&'a EpisodeSamples> {
+    set.iter()
+        .filter(|(i, _)| keep(*i))
+        .map(|&(_, e)| e)
+        .collect()
 }
 
 /// One fitted setting.
@@ -308,9 +392,15 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
             .iter()
             .map(|w| format!("            {w:?},\n"))
             .collect();
+        let t: String = f
+            .model
+            .thresholds
+            .iter()
+            .map(|t| format!("            {t:?},\n"))
+            .collect();
         s.push_str(&format!(
-            "    // {} decision points.\n    StopModel {{\n        rot_bins: {},\n        weights: [\n{}        ],\n        bias: {:?},\n    }},\n",
-            f.fit_samples, f.model.rot_bins, w, f.model.bias
+            "    // {} decision points.\n    StopModel {{\n        rot_bins: {},\n        weights: [\n{}        ],\n        bias: {:?},\n        thresholds: [\n{}        ],\n    }},\n",
+            f.fit_samples, f.model.rot_bins, w, f.model.bias, t
         ));
     }
     s.push_str("];\n");
@@ -321,7 +411,7 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
 pub fn markdown(fitted: &[Fitted], command: &str) -> String {
     let mut s = String::from("# Calibrated stop: fit and held-out check\n\n");
     s.push_str(&format!("Produced by `{command}`.\n\n"));
-    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the edge of the refined pose's cell, fraction of bearings unexplained, repeated readings per bearing, refined pose and argmax disagree (`core-nostd/src/stop/mod.rs`; readings and explained readings are counted per distinct bearing).\n\n");
+    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the edge of the refined pose's cell, fraction of bearings unexplained, repeated readings per bearing, refined pose and argmax disagree, the likelihood margin over the best rival belief mode below and above 10 nats (`core-nostd/src/stop/mod.rs`; readings and explained readings are counted per distinct bearing).\n\n");
     for f in fitted {
         let h = &f.held_out;
         s.push_str(&format!(
@@ -345,9 +435,9 @@ pub fn markdown(fitted: &[Fitted], command: &str) -> String {
                 obs
             ));
         }
-        s.push_str("\nStopping at the first decision point whose estimate is below P:\n\n| P | episodes stopped | of which wrong |\n|---|---|---|\n");
-        for &(p, n, w) in &h.first_crossing {
-            s.push_str(&format!("| {p} | {n} | {:.4} |\n", w));
+        s.push_str("\nStopping at the first decision point whose estimate is below the threshold for a stated risk P (the table fitted on the threshold agents' fitting half, checked here on their held-out half):\n\n| stated P | threshold on the estimate | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n");
+        for &(p, t, n, w, r) in &h.first_crossing {
+            s.push_str(&format!("| {p} | {t:.5} | {n} | {w:.4} | {r:.2} |\n"));
         }
         s.push('\n');
     }
@@ -370,6 +460,16 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
                 .map_err(|e| anyhow::anyhow!("--rot-bins '{s}': {e}"))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let threshold_agents = a
+        .threshold_agents
+        .as_deref()
+        .unwrap_or(&a.agents)
+        .split(',')
+        .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    if let Some(k) = threshold_agents.iter().find(|k| !agents.contains(k)) {
+        anyhow::bail!("--threshold-agents: {k:?} is not among --agents");
+    }
     if a.plans < 2 {
         anyhow::bail!("--plans must be at least 2 (half fit, half check)");
     }
@@ -431,10 +531,18 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
                 writeln!(f, "{}", serde_json::json!({"rot_bins": k, "sample": s}))?;
             }
         }
-        let (fit, check): (Vec<&EpisodeSamples>, Vec<&EpisodeSamples>) = episodes
+        // Episodes come in job order: every plan of the first agent, then the next.
+        let agent_of = |i: usize| agents[i / a.plans as usize];
+        let (fit, check): (Vec<(usize, &EpisodeSamples)>, Vec<(usize, &EpisodeSamples)>) = episodes
             .iter()
-            .filter(|e| !e.is_empty())
-            .partition(|e| e[0].plan % 2 == 0);
+            .enumerate()
+            .filter(|(_, e)| !e.is_empty())
+            .partition(|(_, e)| e[0].plan % 2 == 0);
+        let of_threshold_agents = |i: usize| threshold_agents.contains(&agent_of(i));
+        let threshold_fit = episodes_where(&fit, of_threshold_agents);
+        let threshold_check = episodes_where(&check, of_threshold_agents);
+        let fit: Vec<&EpisodeSamples> = fit.into_iter().map(|(_, e)| e).collect();
+        let check: Vec<&EpisodeSamples> = check.into_iter().map(|(_, e)| e).collect();
         let xs: Vec<[f64; FEATURES]> = fit
             .iter()
             .flat_map(|e| e.iter())
@@ -445,12 +553,14 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
             anyhow::bail!("K = {k}: no decision point passed the stop gate; nothing to fit");
         }
         let (w, b) = fit_logistic(&xs, &ys, a.ridge);
-        let model = StopModel {
+        let mut model = StopModel {
             rot_bins: k,
             weights: w.map(|v| v as f32),
             bias: b as f32,
+            thresholds: STATED_RISKS,
         };
-        let held_out = held_out(&model, &check);
+        model.thresholds = threshold_table(&model, &threshold_fit);
+        let held_out = held_out(&model, &check, &threshold_check);
         fitted.push(Fitted {
             model,
             fit_samples: xs.len(),

@@ -30,6 +30,7 @@ use crate::registration::{
     self, AnnealParams, Measurement, Observability, Observations, RangeModel, Registration,
     RegistrationError,
 };
+use crate::stop::rivals::{self, RivalCheck};
 use crate::stop::{self, StopFeatures, StopModel};
 use crate::world::floorplan::FloorPlan;
 use crate::world::geometry::Pose2;
@@ -137,6 +138,8 @@ pub struct Pipeline {
     /// step the confident rule and [`Pipeline::finish`] refine the same readings, and on the
     /// instrument one refinement is up to seconds.
     last_refinement: Option<((usize, u32), Refinement)>,
+    /// The rival check of `last_refinement` ([`rivals::check`]), computed with it.
+    last_rivals: Option<RivalCheck>,
     /// The last refinements at other belief modes, newest first
     /// ([`refine::keep_alternate`]): a carried re-fit may start from them when the argmax
     /// returns to one.
@@ -183,6 +186,7 @@ impl Pipeline {
             voted: false,
             ready: false,
             last_refinement: None,
+            last_rivals: None,
             alternate_refinements: [None; refine::ALTERNATE_MODES],
             best_answer: None,
         }
@@ -218,6 +222,7 @@ impl Pipeline {
         self.plan = plan.clone();
         self.observations.clear();
         self.last_refinement = None;
+        self.last_rivals = None;
         self.alternate_refinements = [None; refine::ALTERNATE_MODES];
         self.best_answer = None;
         self.params = *params;
@@ -253,7 +258,8 @@ impl Pipeline {
                     self.remember_if_best(risk);
                     Some(risk)
                 });
-                risk.filter(|&r| r < self.params.config.stop_risk)
+                let model = StopModel::for_rot_bins(self.params.rot_bins);
+                risk.filter(|&r| model.stops(r, self.params.config.stop_risk))
                     .map(|_| Stop::Confident)?
             }
             Termination::Oracle => self
@@ -308,7 +314,62 @@ impl Pipeline {
         if let (Some(old), Ok(new)) = (last, &refined) {
             refine::keep_alternate(&mut self.alternate_refinements, &old, new, &icp);
         }
-        self.last_refinement = refined.ok().map(|r| (key, r));
+        // The rivals may overrule the argmax's refinement (`rivals::check`): the answer,
+        // and what the next reading carries on from, is the one that explains the readings.
+        let checked = refined.ok().map(|r| {
+            if self.params.termination == Termination::Confident && !self.may_stop_on(&r) {
+                RivalCheck::not_searched(&r)
+            } else {
+                self.rivals_of(&self.plan, &r, &budget)
+            }
+        });
+        self.last_refinement = checked.map(|c| (key, c.answer));
+        self.last_rivals = checked;
+    }
+
+    /// Whether the calibrated stop could stop on `refined` for some rival margin: its
+    /// estimate, lowest over the margins where the model's two linear margin pieces can
+    /// take their minimum (both ends and the knee), is below the threshold. Where this is
+    /// false no rival search can make the episode stop, and the instrument skips it
+    /// (issue 22's budget: the rivals are most of an update's instructions). The
+    /// calibration's action-limit episodes always search.
+    fn may_stop_on(&self, refined: &Refinement) -> bool {
+        let Some(peak_mass) = self.stop_gate() else {
+            return false;
+        };
+        let model = StopModel::for_rot_bins(self.params.rot_bins);
+        [-rivals::MARGIN_CAP, stop::MARGIN_KNEE, rivals::MARGIN_CAP]
+            .iter()
+            .filter_map(|&m| self.features_with(peak_mass, refined, m))
+            .any(|f| model.stops(model.risk(&f), self.params.config.stop_risk))
+    }
+
+    /// The rival check ([`rivals::check`]) of `refined`, a refinement of the readings so far.
+    fn rivals_of(&self, plan: &FloorPlan, refined: &Refinement, budget: &Budget) -> RivalCheck {
+        rivals::check(&self.refine_input(plan), refined, self.order, budget)
+    }
+
+    /// The rival margin of `refined`: the one computed with the kept refinement when it is
+    /// that one, else searched now (once, at the end of an episode that kept none).
+    fn rival_margin(&self, refined: &Refinement) -> f32 {
+        match (self.last_refinement, self.last_rivals) {
+            (Some((key, kept)), Some(check))
+                if key == self.refinement_key() && kept == *refined =>
+            {
+                check.margin
+            }
+            _ => {
+                let budget = Budget::per_reading(self.params.heading_known());
+                let check = self.rivals_of(&self.plan, refined, &budget);
+                if check.switched {
+                    // A rival explains the readings better than `refined` does.
+                    (refined.fit.log_likelihood - check.answer.fit.log_likelihood)
+                        .clamp(-rivals::MARGIN_CAP, 0.0)
+                } else {
+                    check.margin
+                }
+            }
+        }
     }
 
     /// Keeps the current moment as the episode's answer when its estimated risk is the
@@ -364,6 +425,16 @@ impl Pipeline {
 
     /// [`StopFeatures`] of an already computed refinement.
     fn features_of(&self, peak_mass: f32, refined: &Refinement) -> Option<StopFeatures> {
+        self.features_with(peak_mass, refined, self.rival_margin(refined))
+    }
+
+    /// [`StopFeatures`] of `refined` with the rival margin `rival_margin`.
+    fn features_with(
+        &self,
+        peak_mass: f32,
+        refined: &Refinement,
+        rival_margin: f32,
+    ) -> Option<StopFeatures> {
         let grid = self.localizer.grid();
         let argmax = self.localizer.argmax()?;
         let answer = self.answer_cell(refined)?;
@@ -397,6 +468,7 @@ impl Pipeline {
             agrees: grid.cell_of_pose(&pose).is_some_and(|c| {
                 c.ix == argmax.ix && c.iy == argmax.iy && grid.bin_distance(c.bin, argmax.bin) <= 1
             }),
+            rival_margin,
         })
     }
 

@@ -254,9 +254,12 @@ fn print_outcome(t: &Trajectory) {
     }
     match o.stop_risk {
         Some(r) => println!(
-            "estimated risk of a wrong registration: {:.2} % (the confident stop stops below {:.2} %)",
+            "estimated risk of a wrong registration: {:.2} % (for a stated risk of {:.2} % the confident stop stops below {:.2} %)",
             100.0 * r,
-            100.0 * t.spec.config.stop_risk
+            100.0 * t.spec.config.stop_risk,
+            100.0
+                * activesense_core::stop::StopModel::for_rot_bins(t.spec.rot_bins)
+                    .threshold(t.spec.config.stop_risk)
         ),
         None => println!(
             "estimated risk of a wrong registration: not available (belief peak mass below {}, fewer readings than unknowns, or no registration)",
