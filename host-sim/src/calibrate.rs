@@ -88,6 +88,9 @@ pub struct Sample {
 /// The samples of one episode, in step order.
 type EpisodeSamples = Vec<Sample>;
 
+/// An episode's samples with its index in job order (which says the agent).
+type Indexed<'a> = (usize, &'a EpisodeSamples);
+
 /// Runs the calibration episodes of one setting; one sample list per episode.
 pub fn collect(opts: &EvalOptions, rot_bins: u8, progress: bool) -> Vec<EpisodeSamples> {
     let jobs: Vec<(AgentKind, u32)> = opts
@@ -353,7 +356,7 @@ pub fn threshold_table(
 
 /// The episodes of `set` (index, samples) whose index passes `keep`.
 fn episodes_where<'a>(
-    set: &[(usize, &'a EpisodeSamples)],
+    set: &[Indexed<'a>],
     keep: impl Fn(usize) -> bool,
 ) -> Vec<&'a EpisodeSamples> {
     set.iter()
@@ -533,7 +536,7 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
         }
         // Episodes come in job order: every plan of the first agent, then the next.
         let agent_of = |i: usize| agents[i / a.plans as usize];
-        let (fit, check): (Vec<(usize, &EpisodeSamples)>, Vec<(usize, &EpisodeSamples)>) = episodes
+        let (fit, check): (Vec<Indexed>, Vec<Indexed>) = episodes
             .iter()
             .enumerate()
             .filter(|(_, e)| !e.is_empty())
@@ -608,6 +611,64 @@ mod tests {
             assert!((got - want).abs() < 0.12, "{w:?} vs {w_true:?}");
         }
         assert!((b - b_true).abs() < 0.12, "{b}");
+    }
+
+    /// The threshold table: with a model whose estimate is the peak mass itself, episodes
+    /// whose first crossings are wrong in 0 %, 10 % and 50 % of the stops below 0.05, 0.5
+    /// and above give each stated risk the largest threshold that keeps it.
+    #[test]
+    fn threshold_table_keeps_each_stated_risk_at_first_crossing() {
+        let mut weights = [0.0; FEATURES];
+        weights[0] = 1.0; // logit of the peak mass: σ(logit p) = p
+        let model = StopModel {
+            rot_bins: 1,
+            weights,
+            bias: 0.0,
+            thresholds: STATED_RISKS,
+        };
+        let point = |risk: f32, wrong: bool| Sample {
+            plan: 0,
+            features: StopFeatures {
+                peak_mass: risk,
+                entropy: 0.0,
+                readings: 3,
+                repeats: 0,
+                explained: 3,
+                unknowns: 2,
+                observability: 0.0,
+                offset_cells: 0.0,
+                offset_bins: 0.0,
+                edge_margin: 0.0,
+                agrees: true,
+                rival_margin: 0.0,
+            },
+            wrong,
+        };
+        let episodes: Vec<EpisodeSamples> = (0..100)
+            .map(|i| vec![point(0.6, i < 50), point(0.05, i < 10), point(0.001, false)])
+            .collect();
+        let refs: Vec<&EpisodeSamples> = episodes.iter().collect();
+        assert!((model.risk(&episodes[0][1].features) - 0.05).abs() < 1e-6);
+        let t = threshold_table(&model, &refs);
+        for (p, t) in STATED_RISKS.iter().zip(&t) {
+            if *p < 0.1 {
+                // Every stop below 0.05 is right; one above it lets the 10 % in.
+                assert!((0.04..=0.05).contains(t), "P = {p}: {t}");
+            } else {
+                assert!((0.5..=0.6).contains(t), "P = {p}: {t}");
+            }
+        }
+        // The held-out report states what the table does there.
+        let h = held_out(
+            &StopModel {
+                thresholds: t,
+                ..model
+            },
+            &refs,
+            &refs,
+        );
+        let at_10 = h.first_crossing.iter().find(|r| r.0 == 0.1).unwrap();
+        assert_eq!((at_10.2, at_10.3), (100, 0.1));
     }
 
     /// Perfectly separable data (the first feature decides the label) must not make the

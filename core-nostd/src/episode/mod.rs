@@ -104,8 +104,9 @@ pub struct EpisodeConfig {
     /// protocol carries it since v4, so the instrument runs the same). Left out of JSON when 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub min_observability: f32,
-    /// The confident stop's risk ([`crate::stop`]): [`Termination::Confident`] stops only once the
-    /// estimated probability that the registration is wrong is below this. Finite, in (0, 1].
+    /// The confident stop's stated risk ([`crate::stop`]): [`Termination::Confident`] stops
+    /// once the estimated probability that the registration is wrong is below the threshold
+    /// calibrated for it ([`crate::stop::StopModel::threshold`]). Finite, in (0, 1].
     #[serde(default = "default_stop_risk")]
     pub stop_risk: f32,
 }

@@ -138,8 +138,9 @@ pub struct Pipeline {
     /// step the confident rule and [`Pipeline::finish`] refine the same readings, and on the
     /// instrument one refinement is up to seconds.
     last_refinement: Option<((usize, u32), Refinement)>,
-    /// The rival check of `last_refinement` ([`rivals::check`]), computed with it.
-    last_rivals: Option<RivalCheck>,
+    /// The rival margin of `last_refinement` ([`rivals::check`]), computed with it (4 bytes
+    /// of static RAM: the answer itself is `last_refinement`).
+    last_margin: Option<f32>,
     /// The last refinements at other belief modes, newest first
     /// ([`refine::keep_alternate`]): a carried re-fit may start from them when the argmax
     /// returns to one.
@@ -186,7 +187,7 @@ impl Pipeline {
             voted: false,
             ready: false,
             last_refinement: None,
-            last_rivals: None,
+            last_margin: None,
             alternate_refinements: [None; refine::ALTERNATE_MODES],
             best_answer: None,
         }
@@ -222,7 +223,7 @@ impl Pipeline {
         self.plan = plan.clone();
         self.observations.clear();
         self.last_refinement = None;
-        self.last_rivals = None;
+        self.last_margin = None;
         self.alternate_refinements = [None; refine::ALTERNATE_MODES];
         self.best_answer = None;
         self.params = *params;
@@ -324,7 +325,7 @@ impl Pipeline {
             }
         });
         self.last_refinement = checked.map(|c| (key, c.answer));
-        self.last_rivals = checked;
+        self.last_margin = checked.map(|c| c.margin);
     }
 
     /// Whether the calibrated stop could stop on `refined` for some rival margin: its
@@ -350,25 +351,19 @@ impl Pipeline {
     }
 
     /// The rival margin of `refined`: the one computed with the kept refinement when it is
-    /// that one, else searched now (once, at the end of an episode that kept none).
+    /// that one, else 0 (not searched). Only an episode that kept no refinement gets the
+    /// latter, at its end: the oracle stop, whose estimate is for information only. Searching
+    /// the rivals there cost the device 18 M more instructions per oracle-stopped K = 10
+    /// episode (heuristic-1, `mcu-bench --episodes 20`: 25.8 M on average) for a number
+    /// nobody stops on.
     fn rival_margin(&self, refined: &Refinement) -> f32 {
-        match (self.last_refinement, self.last_rivals) {
-            (Some((key, kept)), Some(check))
+        match (self.last_refinement, self.last_margin) {
+            (Some((key, kept)), Some(margin))
                 if key == self.refinement_key() && kept == *refined =>
             {
-                check.margin
+                margin
             }
-            _ => {
-                let budget = Budget::per_reading(self.params.heading_known());
-                let check = self.rivals_of(&self.plan, refined, &budget);
-                if check.switched {
-                    // A rival explains the readings better than `refined` does.
-                    (refined.fit.log_likelihood - check.answer.fit.log_likelihood)
-                        .clamp(-rivals::MARGIN_CAP, 0.0)
-                } else {
-                    check.margin
-                }
-            }
+            _ => RivalCheck::not_searched(refined).margin,
         }
     }
 

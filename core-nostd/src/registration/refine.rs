@@ -912,6 +912,75 @@ mod tests {
         assert!(all.score() >= r.score() - 1e-3);
     }
 
+    /// Readings at `bearings` (model frame, heading known) from `truth` in `plan`, voted.
+    fn readings(plan: &FloorPlan, truth: &Pose2, bearings: &[f32]) -> (Observations, GhtLocalizer) {
+        let mut obs = Observations::new();
+        let mut loc = GhtLocalizer::new_empty();
+        loc.reset(plan, &LocalizerConfig::known_heading(truth.theta))
+            .unwrap();
+        for &b in bearings {
+            let r = plan
+                .ray_cast(truth.translation(), unit(truth.theta + b))
+                .unwrap()
+                .range;
+            obs.push(Measurement::new(b, r)).unwrap();
+            loc.update(b, r).unwrap();
+        }
+        (obs, loc)
+    }
+
+    /// Four readings on two parallel walls and one across: a pose slid along the walls
+    /// explains the four, and the percentile rejection lets a fit stay there; the polish,
+    /// which keeps every pair, brings it back to the pose all five agree on.
+    #[test]
+    fn the_polish_recovers_the_reading_rejection_dropped() {
+        let plan = FloorPlan::new(&[
+            crate::world::geometry::v2(0.0, 0.0),
+            crate::world::geometry::v2(10.0, 0.0),
+            crate::world::geometry::v2(10.0, 6.0),
+            crate::world::geometry::v2(0.0, 6.0),
+        ])
+        .unwrap()
+        .centered();
+        let truth = Pose2::new(1.0, 0.5, 0.0);
+        let deg = core::f32::consts::PI / 180.0;
+        let (obs, loc) = readings(
+            &plan,
+            &truth,
+            &[90.0 * deg, -90.0 * deg, 80.0 * deg, -80.0 * deg, 0.0],
+        );
+        let mut params = AnnealParams::default();
+        params.icp.fixed_heading = true;
+        params.icp.trust_translation = 1.0;
+        let input = RefineInput {
+            plan: &plan,
+            obs: &obs,
+            localizer: &loc,
+            params,
+            screen: screening(&params),
+            heading_span: 0.0,
+            starts: 1,
+            unknowns: 2,
+            model: RangeModel::default(),
+        };
+        let slid = Pose2::new(1.4, 0.5, 0.0);
+        let fit = registration::range_fit(&plan, &obs, &slid, &input.model);
+        assert_eq!(
+            fit.explained, 4,
+            "the slid pose explains the four on the long walls"
+        );
+        let mut start = at(slid.x, slid.y, slid.theta);
+        start.fit = fit;
+        start.log_prior = ln(neighbourhood_mass(&loc, &slid).max(MIN_PRIOR_MASS));
+        let polished = polish(&input, start);
+        assert!(polished.score() > start.score(), "{polished:?}");
+        assert_eq!(polished.fit.explained, 5);
+        let err = (polished.registration.pose.translation() - truth.translation()).norm();
+        assert!(err < 0.01, "{err}");
+        // Never worse: polishing the polished result changes nothing for the worse.
+        assert!(polish(&input, polished).score() >= polished.score());
+    }
+
     /// Past `full_readings` the annealing's perturbations shrink so that perturbations
     /// times readings stays about constant; the exhaustive budget never shrinks them.
     #[test]

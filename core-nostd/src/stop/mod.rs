@@ -33,9 +33,9 @@ use serde::{Deserialize, Serialize};
 
 /// Peak mass from which the stop features are computed (and the stop considered). At 0.5
 /// (before the rival check) the gate opened after 4–5 readings with the heading known and
-/// 6–9 without, on 400 calibration plans of the learnt policy, though the answer was
-/// within tolerance from the third or fourth; 0.1 kept 99.6 % of the stops a rival-margin
-/// rule made at K = 10 (`docs/LEARNING.md`, "The stop that reads rivals").
+/// 6–9 without, though the answer was often within tolerance earlier (`docs/LEARNING.md`,
+/// "The stop that reads rivals"); the rival margin now says what the peak mass could not,
+/// and the gate only keeps the refinement from running on a belief with no mode at all.
 pub const GATE_PEAK_MASS: f32 = 0.1;
 
 /// Length scale (m) of the edge feature: about the registration's own error.

@@ -85,9 +85,10 @@ pub struct EvalArgs {
     /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
     #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
     min_observability: f32,
-    /// With --termination confident: stop only once the estimated probability that the
-    /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
-    /// 'Calibrated stop'). The instrument applies the same rule.
+    /// With --termination confident: the risk of a wrong answer you accept. The stop answers
+    /// once the estimated probability that the registration is wrong falls below the
+    /// threshold that, on the calibration plans, made the first such stops wrong at most P of
+    /// the time (docs/EVALUATION.md, 'Calibrated stop'). The instrument applies the same rule.
     #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
     stop_risk: f32,
     /// When an answer is right: position error in metres and heading error in degrees,

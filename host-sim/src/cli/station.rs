@@ -101,7 +101,8 @@ pub struct StationArgs {
     /// int8 blob for learnt-int8 (default: the firmware's for K = 10).
     #[arg(long)]
     pub int8: Option<PathBuf>,
-    /// Stop once the calibrated P(wrong registration) is below P.
+    /// The risk of a wrong answer you accept: stop once the calibrated P(wrong registration)
+    /// is below the threshold calibrated for P (docs/EVALUATION.md, 'Calibrated stop').
     #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
     pub stop_risk: f32,
     /// Action limit.
