@@ -917,7 +917,8 @@ pub(crate) mod tests {
             "{f:?}"
         );
         let risk = p.stop_risk_estimate().expect("features agree");
-        assert!(risk < DEFAULT_STOP_RISK);
+        let model = StopModel::for_rot_bins(params.rot_bins);
+        assert!(risk < model.threshold(DEFAULT_STOP_RISK));
         let r = p.finish(&plan);
         assert_eq!(r.recognised, Some(true));
         assert_eq!(
@@ -930,10 +931,26 @@ pub(crate) mod tests {
             (best.translation() - truth.translation()).norm() < 0.02,
             "{best:?}"
         );
-        // The same readings do not stop under a risk below the estimate.
-        p.params.config.stop_risk = 0.5 * risk;
+        // The same readings do not stop at a stated risk whose threshold is below the
+        // estimate, and stop again at one whose threshold is just above it.
+        let stated_with_threshold = |t: f32| {
+            // threshold() is non-decreasing in the stated risk: bisect in ln p.
+            let (mut lo, mut hi) = (1e-9f32, 1.0f32);
+            for _ in 0..60 {
+                let mid = libm::sqrtf(lo * hi);
+                if model.threshold(mid) < t {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            (lo, hi)
+        };
+        let (below, above) = stated_with_threshold(risk);
+        assert!(model.threshold(below) < risk && model.threshold(above) >= risk);
+        p.params.config.stop_risk = below;
         assert_eq!(p.should_stop(), None);
-        p.params.config.stop_risk = risk * 1.01;
+        p.params.config.stop_risk = stated_with_threshold(risk * 1.01).1;
         assert_eq!(p.should_stop(), Some(Stop::Confident));
 
         // The kept refinement follows the readings: after one more range the pipeline's
