@@ -79,6 +79,7 @@
 //! bit for bit on host and MCU. Nothing is allocated; the per-call scratch is a few KiB of
 //! stack ([`MAX_OBSERVATIONS`] pairs, ≈ 14 KiB at 500).
 
+pub mod budget;
 pub mod fits;
 pub mod icp;
 pub mod pose_distance;
