@@ -636,7 +636,7 @@ fn finish_from(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::localization::LocalizerConfig;
     use crate::pipeline::tests::l_room;
@@ -676,17 +676,7 @@ mod tests {
             "the outlier drags the plain fit: {plain_error}"
         );
 
-        let input = RefineInput {
-            plan: &plan,
-            obs: &obs,
-            localizer: &loc,
-            params,
-            screen: screening(&params),
-            heading_span: 0.0,
-            starts: 1,
-            unknowns: 2,
-            model: RangeModel::default(),
-        };
+        let input = known_heading_input(&plan, &obs, &loc, params);
         // Refine around the truth's cell directly (a coarse success; the belief's own
         // argmax may be a neighbour with three votes this sparse).
         let mut n = 0;
@@ -708,8 +698,32 @@ mod tests {
         assert!(all.score() >= r.score() - 1e-3);
     }
 
+    /// A heading-known refinement input with the default range model and screening.
+    pub(crate) fn known_heading_input<'a>(
+        plan: &'a FloorPlan,
+        obs: &'a Observations,
+        loc: &'a GhtLocalizer,
+        params: AnnealParams,
+    ) -> RefineInput<'a> {
+        RefineInput {
+            plan,
+            obs,
+            localizer: loc,
+            params,
+            screen: screening(&params),
+            heading_span: 0.0,
+            starts: 1,
+            unknowns: 2,
+            model: RangeModel::default(),
+        }
+    }
+
     /// Readings at `bearings` (model frame, heading known) from `truth` in `plan`, voted.
-    fn readings(plan: &FloorPlan, truth: &Pose2, bearings: &[f32]) -> (Observations, GhtLocalizer) {
+    pub(crate) fn readings(
+        plan: &FloorPlan,
+        truth: &Pose2,
+        bearings: &[f32],
+    ) -> (Observations, GhtLocalizer) {
         let mut obs = Observations::new();
         let mut loc = GhtLocalizer::new_empty();
         loc.reset(plan, &LocalizerConfig::known_heading(truth.theta))
@@ -748,17 +762,7 @@ mod tests {
         let mut params = AnnealParams::default();
         params.icp.fixed_heading = true;
         params.icp.trust_translation = 1.0;
-        let input = RefineInput {
-            plan: &plan,
-            obs: &obs,
-            localizer: &loc,
-            params,
-            screen: screening(&params),
-            heading_span: 0.0,
-            starts: 1,
-            unknowns: 2,
-            model: RangeModel::default(),
-        };
+        let input = known_heading_input(&plan, &obs, &loc, params);
         let slid = Pose2::new(1.4, 0.5, 0.0);
         let fit = registration::range_fit(&plan, &obs, &slid, &input.model);
         assert_eq!(

@@ -157,11 +157,9 @@ fn modes_of(loc: &GhtLocalizer) -> HVec<Mode, { MAX_RIVALS + 2 }> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::localization::LocalizerConfig;
     use crate::pipeline::tests::l_room;
-    use crate::registration::refine::screening;
-    use crate::registration::{AnnealParams, Measurement, Observations, RangeModel};
-    use crate::world::geometry::unit;
+    use crate::registration::refine::tests::{known_heading_input, readings};
+    use crate::registration::AnnealParams;
 
     /// An answer fitted in the wrong part of the room loses to the rival at the belief's
     /// argmax, which explains every reading: the check switches to it, and the margin says
@@ -170,32 +168,11 @@ mod tests {
     fn a_rival_that_explains_the_readings_better_becomes_the_answer() {
         let plan = l_room();
         let truth = Pose2::new(-1.2, -0.9, 0.3);
-        let mut obs = Observations::new();
-        let mut loc = GhtLocalizer::new_empty();
-        loc.reset(&plan, &LocalizerConfig::known_heading(truth.theta))
-            .unwrap();
-        for b in [-0.3f32, 0.9, 1.7, 2.6, 3.3, 4.4] {
-            let r = plan
-                .ray_cast(truth.translation(), unit(truth.theta + b))
-                .unwrap()
-                .range;
-            obs.push(Measurement::new(b, r)).unwrap();
-            loc.update(b, r).unwrap();
-        }
+        let (obs, loc) = readings(&plan, &truth, &[-0.3, 0.9, 1.7, 2.6, 3.3, 4.4]);
         let mut params = AnnealParams::default();
         params.icp.fixed_heading = true;
         params.icp.trust_translation = loc.grid().cell[0].max(loc.grid().cell[1]);
-        let input = RefineInput {
-            plan: &plan,
-            obs: &obs,
-            localizer: &loc,
-            params,
-            screen: screening(&params),
-            heading_span: 0.0,
-            starts: 1,
-            unknowns: 2,
-            model: RangeModel::default(),
-        };
+        let input = known_heading_input(&plan, &obs, &loc, params);
         let budget = Budget::per_reading(true);
         let right = refine::refine_within(&input, &budget).unwrap();
         let err = |r: &Refinement| (r.registration.pose.translation() - truth.translation()).norm();
