@@ -12,7 +12,7 @@ use clap::{Args, FromArgMatches};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 
-/// Every hyper-parameter of a training run. The first thirteen are `activesense train` flags
+/// Every hyper-parameter of a training run. The first fourteen are `activesense train` flags
 /// (doc comment = help text); the others are fixed.
 #[derive(Args, Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HyperParams {
@@ -36,6 +36,12 @@ pub struct HyperParams {
     /// Warm-start updates imitating the teacher (0 = pure A2C from scratch).
     #[arg(long, default_value_t = 200)]
     pub imitation_updates: u64,
+    /// Updates after the imitation that train only the critic (the policy's gradient is
+    /// zero; actions are still drawn from it): a fine-tune (`--init`) under another
+    /// `--termination` starts with a critic that predicts the old episode's returns.
+    #[arg(long, default_value_t = 0)]
+    #[serde(default)]
+    pub critic_warmup_updates: u64,
     /// Adam learning rate.
     #[arg(long = "lr", value_name = "LR", default_value_t = 3e-4)]
     pub learning_rate: f32,
@@ -179,6 +185,7 @@ mod tests {
             num_envs: 16,
             segment_len: 16,
             imitation_updates: 200,
+            critic_warmup_updates: 0,
             learning_rate: 3e-4,
             ent_coef: 0.01,
             log_every: 10,

@@ -22,7 +22,9 @@
 //!
 //! **Warm start.** The first `imitation_updates` updates clone a teacher (heuristic-1 by
 //! default): the teacher acts, the actor is trained by cross-entropy on its actions and the
-//! critic on the returns of the paper's reward. Then the policy acts and A2C takes over.
+//! critic on the returns of the paper's reward. Then the policy acts and A2C takes over,
+//! after `critic_warmup_updates` updates (default 0) in which only the critic learns: a
+//! fine-tune under another termination starts with a critic fitted to the old returns.
 //!
 //! **Determinism.** Each environment draws from its own PCG stream derived from the seed;
 //! environments step in parallel but only touch their own state; the visitation counts
@@ -241,7 +243,7 @@ pub struct LogRow {
     pub episodes: u64,
     /// Wall time so far (s).
     pub wall_s: f64,
-    /// "imitation" or "a2c".
+    /// "imitation", "critic" (the critic's warm-up) or "a2c".
     pub phase: String,
     /// Mean return of the episodes finished since the last line.
     pub mean_return: f64,
@@ -333,6 +335,7 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
             }
         }
         let imitation = update <= hp.imitation_updates;
+        let critic_only = !imitation && update <= hp.imitation_updates + hp.critic_warmup_updates;
         adam.lr = if imitation {
             hp.imitation_learning_rate
         } else {
@@ -427,7 +430,12 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
                 let onehot = if j == a { 1.0 } else { 0.0 };
                 // Entropy bonus: d(−c·H)/dz_j = c·π_j·(log π_j + H).
                 let dent = hp.ent_coef * p[j] * (logp[j] + h);
-                dlogits[i * 3 + j] = (w * (p[j] - onehot) + dent) * inv_n;
+                // The critic's warm-up moves the value head (and the shared trunk) only.
+                dlogits[i * 3 + j] = if critic_only {
+                    0.0
+                } else {
+                    (w * (p[j] - onehot) + dent) * inv_n
+                };
             }
             let dv = v[i] - returns[i];
             vloss_sum += 0.5 * (dv as f64) * (dv as f64);
@@ -448,7 +456,13 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
                 env_steps,
                 episodes,
                 wall,
-                if imitation { "imitation" } else { "a2c" },
+                if imitation {
+                    "imitation"
+                } else if critic_only {
+                    "critic"
+                } else {
+                    "a2c"
+                },
                 entropy_sum / n as f64,
                 vloss_sum / n as f64,
                 grad_norm as f64,
@@ -820,6 +834,40 @@ mod tests {
         );
         assert_eq!(out.updates, 220);
         assert!(!out.log.is_empty());
+    }
+
+    #[test]
+    fn the_critic_warm_up_leaves_the_actor_head_alone() {
+        // Three updates that train only the critic: the actor's own layer keeps its
+        // weights bit for bit, while the critic's moves; the log names the phase.
+        let hp = HyperParams {
+            critic_warmup_updates: 3,
+            ..tiny(1, 3, 0)
+        };
+        let start = PolicyNet::new(shape_for(1), hp.seed);
+        let out = train(
+            &hp,
+            &RunOptions {
+                init: Some(start.clone()),
+                ..RunOptions::default()
+            },
+        )
+        .unwrap();
+        let layer = |name: &str| {
+            let l = start
+                .shape
+                .layers()
+                .into_iter()
+                .find(|l| l.name == name)
+                .unwrap();
+            l.offset..l.offset + l.len()
+        };
+        assert_eq!(out.net.params[layer("actor")], start.params[layer("actor")]);
+        assert_ne!(
+            out.net.params[layer("critic")],
+            start.params[layer("critic")]
+        );
+        assert!(out.log.iter().all(|r| r.phase == "critic"));
     }
 
     #[test]
