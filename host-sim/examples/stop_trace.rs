@@ -148,8 +148,11 @@ fn main() {
     for (t, m) in &traces {
         let eligible: Vec<&Point> = t.iter().filter(|q| q.readings >= *m).collect();
         if !eligible.iter().any(|q| q.right)
-            || answer(&eligible, StopModel::for_rot_bins(rot_bins).threshold(0.01))
-                .is_none_or(|a| a.right)
+            || answer(
+                &eligible,
+                StopModel::for_rot_bins(rot_bins).threshold_for(AgentKind::Heuristic1, 0.01),
+            )
+            .is_none_or(|a| a.right)
         {
             continue;
         }
@@ -162,7 +165,7 @@ fn main() {
     println!("| P | stopped | wrong stops | right, last reading | right, lowest-risk moment | same moments scored by the argmax's cell |");
     println!("|---|---|---|---|---|---|");
     for stated in [0.005f32, 0.01, 0.02, 0.03, 0.05, 0.1] {
-        let p = StopModel::for_rot_bins(rot_bins).threshold(stated);
+        let p = StopModel::for_rot_bins(rot_bins).threshold_for(AgentKind::Heuristic1, stated);
         let (mut stops, mut wrong, mut last, mut lowest, mut argmax) = (0, 0, 0, 0, 0);
         for (t, m) in &traces {
             let eligible: Vec<&Point> = t.iter().filter(|q| q.readings >= *m).collect();

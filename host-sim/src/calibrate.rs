@@ -19,7 +19,9 @@ use crate::learn::agent::{run_agent_episode_observed, Policies};
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::registration::pose_distance::PoseDistance;
-use activesense_core::stop::{StopFeatures, StopModel, FEATURES, STATED_RISKS};
+use activesense_core::stop::{
+    interpolate_table, AgentTable, StopFeatures, StopModel, AGENT_TABLES, FEATURES, STATED_RISKS,
+};
 use clap::Args;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -54,6 +56,17 @@ pub struct CalibrateArgs {
     /// leave its rare wrong stops too few to place a threshold by.
     #[arg(long)]
     pub threshold_agents: Option<String>,
+    /// Agents that also get a threshold table of their own (`StopModel::agent_tables`, at
+    /// most 2; the agents an instrument runs; "none" for none). Each must be among
+    /// --agents; the learnt policy's table serves learnt-int8 too.
+    #[arg(long, default_value = "learnt,heuristic-1")]
+    pub agent_tables: String,
+    /// Calibration plans per setting for the agents of --agent-tables (at least --plans;
+    /// the first --plans are the pooled fit's episodes, the rest run for the table alone).
+    /// One agent's 500 fitting episodes hold about five wrong stops at 1 %, too few to
+    /// place its threshold by (`docs/EVALUATION.md`).
+    #[arg(long, default_value_t = 4000)]
+    pub agent_table_plans: u32,
     /// Ridge (L2) penalty on the weights.
     #[arg(long, default_value_t = 1e-3)]
     pub ridge: f64,
@@ -91,12 +104,19 @@ type EpisodeSamples = Vec<Sample>;
 /// An episode's samples with its index in job order (which says the agent).
 type Indexed<'a> = (usize, &'a EpisodeSamples);
 
-/// Runs the calibration episodes of one setting; one sample list per episode.
-pub fn collect(opts: &EvalOptions, rot_bins: u8, progress: bool) -> Vec<EpisodeSamples> {
-    let jobs: Vec<(AgentKind, u32)> = opts
-        .agents
+/// Runs the calibration episodes of one setting, `agents` on the calibration plans
+/// `plans`; one sample list per episode, in job order (every plan of the first agent, then
+/// the next).
+pub fn collect(
+    opts: &EvalOptions,
+    rot_bins: u8,
+    agents: &[AgentKind],
+    plans: std::ops::Range<u32>,
+    progress: bool,
+) -> Vec<EpisodeSamples> {
+    let jobs: Vec<(AgentKind, u32)> = agents
         .iter()
-        .flat_map(|&a| (0..opts.plans).map(move |i| (a, i)))
+        .flat_map(|&a| plans.clone().map(move |i| (a, i)))
         .collect();
     let tolerance = opts.tolerance;
     let bar = episode_bar(jobs.len() as u64, progress);
@@ -240,9 +260,49 @@ pub struct HeldOut {
     /// For each stated risk P of [`STATED_RISKS`], on the held-out episodes of the
     /// threshold agents: (P, the model's threshold for it, episodes that stopped at a first
     /// crossing of it, fraction of those that stopped wrongly, mean readings at the stop).
-    pub first_crossing: Vec<(f64, f64, usize, f64, f64)>,
+    pub first_crossing: Vec<FirstCrossing>,
     /// Held-out episodes.
     pub episodes: usize,
+    /// The same first-crossing check for each agent's own table, on that agent's held-out
+    /// episodes.
+    #[serde(default)]
+    pub agents: Vec<AgentCheck>,
+}
+
+/// (stated risk P, the table's threshold for it, episodes that stopped at a first crossing
+/// of it, fraction of those that stopped wrongly, mean readings at the stop).
+pub type FirstCrossing = (f64, f64, usize, f64, f64);
+
+/// The held-out check of one agent's own threshold table.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct AgentCheck {
+    /// The agent's name.
+    pub agent: String,
+    /// Episodes the table was fitted on.
+    pub fit_episodes: usize,
+    /// Held-out episodes.
+    pub episodes: usize,
+    /// As [`HeldOut::first_crossing`].
+    pub first_crossing: Vec<FirstCrossing>,
+}
+
+/// What stopping at the first crossing of `table`'s threshold for each stated risk does in
+/// `episodes`.
+fn first_crossing_check(
+    model: &StopModel,
+    table: &[f32; STATED_RISKS.len()],
+    episodes: &[&EpisodeSamples],
+) -> Vec<FirstCrossing> {
+    STATED_RISKS
+        .iter()
+        .map(|&p| {
+            let t = interpolate_table(table, p);
+            let c = first_crossings(model, episodes, t);
+            // Through the shortest decimal of the f32, so the report says 0.001, not 0.0010000000474974513.
+            let p64 = format!("{p}").parse().unwrap_or(p as f64);
+            (p64, t as f64, c.stops, c.wrong_rate(), c.mean_readings())
+        })
+        .collect()
 }
 
 const RISK_BINS: [f64; 9] = [0.0, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0001];
@@ -267,16 +327,7 @@ fn held_out(
         n += 1;
         wrong += s.wrong as usize;
     }
-    let first_crossing = STATED_RISKS
-        .iter()
-        .map(|&p| {
-            let t = model.threshold(p);
-            let c = first_crossings(model, threshold_episodes, t);
-            // Through the shortest decimal of the f32, so the report says 0.001, not 0.0010000000474974513.
-            let p64 = format!("{p}").parse().unwrap_or(p as f64);
-            (p64, t as f64, c.stops, c.wrong_rate(), c.mean_readings())
-        })
-        .collect();
+    let first_crossing = first_crossing_check(model, &model.thresholds, threshold_episodes);
     HeldOut {
         samples: n,
         wrong_rate: wrong as f64 / n.max(1) as f64,
@@ -286,6 +337,7 @@ fn held_out(
             .collect(),
         first_crossing,
         episodes: episodes.len(),
+        agents: Vec::new(),
     }
 }
 
@@ -384,7 +436,7 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
     s.push_str(command);
     s.push_str("`; do not edit by hand\n");
     s.push_str("//! (the held-out check is in `results/calibration/calibration.md`).\n\n");
-    s.push_str("use crate::stop::StopModel;\n\n");
+    s.push_str("use crate::episode::AgentKind;\nuse crate::stop::{AgentTable, StopModel};\n\n");
     s.push_str("/// One model per fitted rotation setting.\npub const MODELS: &[StopModel] = &[\n");
     for f in fitted {
         // One weight a line, as rustfmt lays the array out: the generated file is the
@@ -401,9 +453,25 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
             .iter()
             .map(|t| format!("            {t:?},\n"))
             .collect();
+        let tables: String = f
+            .model
+            .agent_tables
+            .iter()
+            .map(|a| match a {
+                None => "            None,\n".to_string(),
+                Some(a) => format!(
+                    "            Some(AgentTable {{\n                agent: AgentKind::{:?},\n                thresholds: [\n{}                ],\n            }}),\n",
+                    a.agent,
+                    a.thresholds
+                        .iter()
+                        .map(|t| format!("                    {t:?},\n"))
+                        .collect::<String>()
+                ),
+            })
+            .collect();
         s.push_str(&format!(
-            "    // {} decision points.\n    StopModel {{\n        rot_bins: {},\n        weights: [\n{}        ],\n        bias: {:?},\n        thresholds: [\n{}        ],\n    }},\n",
-            f.fit_samples, f.model.rot_bins, w, f.model.bias, t
+            "    // {} decision points.\n    StopModel {{\n        rot_bins: {},\n        weights: [\n{}        ],\n        bias: {:?},\n        thresholds: [\n{}        ],\n        agent_tables: [\n{}        ],\n    }},\n",
+            f.fit_samples, f.model.rot_bins, w, f.model.bias, t, tables
         ));
     }
     s.push_str("];\n");
@@ -443,6 +511,13 @@ pub fn markdown(fitted: &[Fitted], command: &str) -> String {
             s.push_str(&format!("| {p} | {t:.5} | {n} | {w:.4} | {r:.2} |\n"));
         }
         s.push('\n');
+        for a in &h.agents {
+            s.push_str(&format!("{}'s own table (fitted on its {} even-plan episodes, checked on its {} odd-plan ones; the stop of this agent uses it):\n\n| stated P | threshold on the estimate | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n", a.agent, a.fit_episodes, a.episodes));
+            for &(p, t, n, w, r) in &a.first_crossing {
+                s.push_str(&format!("| {p} | {t:.5} | {n} | {w:.4} | {r:.2} |\n"));
+            }
+            s.push('\n');
+        }
     }
     s
 }
@@ -473,8 +548,28 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
     if let Some(k) = threshold_agents.iter().find(|k| !agents.contains(k)) {
         anyhow::bail!("--threshold-agents: {k:?} is not among --agents");
     }
+    let table_agents = match a.agent_tables.trim() {
+        "" | "none" => Vec::new(),
+        list => list
+            .split(',')
+            .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
+            .collect::<anyhow::Result<Vec<_>>>()?,
+    };
+    if let Some(k) = table_agents.iter().find(|k| !agents.contains(k)) {
+        anyhow::bail!("--agent-tables: {k:?} is not among --agents");
+    }
+    if table_agents.len() > AGENT_TABLES {
+        anyhow::bail!("--agent-tables: at most {AGENT_TABLES} agents have a table of their own");
+    }
     if a.plans < 2 {
         anyhow::bail!("--plans must be at least 2 (half fit, half check)");
+    }
+    if a.agent_table_plans < a.plans {
+        anyhow::bail!(
+            "--agent-table-plans ({}) must be at least --plans ({})",
+            a.agent_table_plans,
+            a.plans
+        );
     }
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new()
@@ -521,7 +616,7 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
             "K = {k}: running {} episodes",
             agents.len() as u32 * a.plans
         );
-        let episodes = collect(&opts, k, opts.progress);
+        let episodes = collect(&opts, k, &agents, 0..a.plans, opts.progress);
         if let Some(path) = &a.samples_out {
             use std::io::Write;
             let mut f = std::io::BufWriter::new(
@@ -561,9 +656,43 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
             weights: w.map(|v| v as f32),
             bias: b as f32,
             thresholds: STATED_RISKS,
+            agent_tables: [None; AGENT_TABLES],
         };
         model.thresholds = threshold_table(&model, &threshold_fit);
-        let held_out = held_out(&model, &check, &threshold_check);
+        let mut checks = Vec::new();
+        for (slot, &agent) in table_agents.iter().enumerate() {
+            if a.agent_table_plans > a.plans {
+                eprintln!(
+                    "K = {k}: running {} more episodes of {} for its own table",
+                    a.agent_table_plans - a.plans,
+                    agent.name()
+                );
+            }
+            let extra = collect(
+                &opts,
+                k,
+                &[agent],
+                a.plans..a.agent_table_plans,
+                opts.progress,
+            );
+            let first = agents.iter().position(|&x| x == agent).unwrap_or(0) * a.plans as usize;
+            let (fit, check): (Vec<&EpisodeSamples>, Vec<&EpisodeSamples>) = episodes
+                [first..first + a.plans as usize]
+                .iter()
+                .chain(&extra)
+                .filter(|e| !e.is_empty())
+                .partition(|e| e[0].plan % 2 == 0);
+            let thresholds = threshold_table(&model, &fit);
+            model.agent_tables[slot] = Some(AgentTable { agent, thresholds });
+            checks.push(AgentCheck {
+                agent: agent.name().to_string(),
+                fit_episodes: fit.len(),
+                episodes: check.len(),
+                first_crossing: first_crossing_check(&model, &thresholds, &check),
+            });
+        }
+        let mut held_out = held_out(&model, &check, &threshold_check);
+        held_out.agents = checks;
         fitted.push(Fitted {
             model,
             fit_samples: xs.len(),
@@ -625,6 +754,7 @@ mod tests {
             weights,
             bias: 0.0,
             thresholds: STATED_RISKS,
+            agent_tables: [None; AGENT_TABLES],
         };
         let point = |risk: f32, wrong: bool| Sample {
             plan: 0,

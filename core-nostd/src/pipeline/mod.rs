@@ -260,7 +260,7 @@ impl Pipeline {
                     Some(risk)
                 });
                 let model = StopModel::for_rot_bins(self.params.rot_bins);
-                risk.filter(|&r| model.stops(r, self.params.config.stop_risk))
+                risk.filter(|&r| model.stops(self.params.agent, r, self.params.config.stop_risk))
                     .map(|_| Stop::Confident)?
             }
             Termination::Oracle => self
@@ -342,7 +342,13 @@ impl Pipeline {
         [-rivals::MARGIN_CAP, stop::MARGIN_KNEE, rivals::MARGIN_CAP]
             .iter()
             .filter_map(|&m| self.features_with(peak_mass, refined, m))
-            .any(|f| model.stops(model.risk(&f), self.params.config.stop_risk))
+            .any(|f| {
+                model.stops(
+                    self.params.agent,
+                    model.risk(&f),
+                    self.params.config.stop_risk,
+                )
+            })
     }
 
     /// The rival check ([`rivals::check`]) of `refined`, a refinement of the readings so far.
@@ -918,7 +924,7 @@ pub(crate) mod tests {
         );
         let risk = p.stop_risk_estimate().expect("features agree");
         let model = StopModel::for_rot_bins(params.rot_bins);
-        assert!(risk < model.threshold(DEFAULT_STOP_RISK));
+        assert!(risk < model.threshold_for(params.agent, DEFAULT_STOP_RISK));
         let r = p.finish(&plan);
         assert_eq!(r.recognised, Some(true));
         assert_eq!(
@@ -938,7 +944,7 @@ pub(crate) mod tests {
             let (mut lo, mut hi) = (1e-9f32, 1.0f32);
             for _ in 0..60 {
                 let mid = libm::sqrtf(lo * hi);
-                if model.threshold(mid) < t {
+                if model.threshold_for(params.agent, mid) < t {
                     lo = mid;
                 } else {
                     hi = mid;
@@ -947,7 +953,10 @@ pub(crate) mod tests {
             (lo, hi)
         };
         let (below, above) = stated_with_threshold(risk);
-        assert!(model.threshold(below) < risk && model.threshold(above) >= risk);
+        assert!(
+            model.threshold_for(params.agent, below) < risk
+                && model.threshold_for(params.agent, above) >= risk
+        );
         p.params.config.stop_risk = below;
         assert_eq!(p.should_stop(), None);
         p.params.config.stop_risk = stated_with_threshold(risk * 1.01).1;

@@ -260,7 +260,7 @@ fn print_outcome(t: &Trajectory) {
             100.0 * t.spec.config.stop_risk,
             100.0
                 * activesense_core::stop::StopModel::for_rot_bins(t.spec.rot_bins)
-                    .threshold(t.spec.config.stop_risk)
+                    .threshold_for(t.spec.agent, t.spec.config.stop_risk)
         ),
         None => println!(
             "estimated risk of a wrong registration: not available (belief peak mass below {}, fewer readings than unknowns, or no registration)",
