@@ -18,7 +18,7 @@ use activesense_core::episode::AgentKind;
 use activesense_core::episode::Termination;
 use activesense_core::policy::BaselineAgent;
 use activesense_core::registration::pose_distance::{PoseDistance, Tolerance};
-use activesense_core::stop::StopModel;
+use activesense_core::stop::{stop_score, StopModel};
 use activesense_core::Pose2;
 use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
 use activesense_sim::world::plans::TEST_SEEDS;
@@ -32,6 +32,14 @@ struct Point {
     argmax_right: bool,
     risk: Option<f32>,
     overruled: Option<bool>,
+}
+
+impl Point {
+    /// The stop's test: the estimate's score ([`stop_score`]) is below the threshold `p`.
+    fn stops_below(&self, p: f32) -> bool {
+        self.risk
+            .is_some_and(|r| stop_score(r, self.readings as u16) < p)
+    }
 }
 
 fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
@@ -86,7 +94,7 @@ fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
 /// model's for a stated risk): the stop, else the lowest-risk moment when the end is
 /// riskier or has no estimate, else the end.
 fn answer<'a>(eligible: &[&'a Point], p: f32) -> Option<&'a Point> {
-    if let Some(stop) = eligible.iter().find(|q| q.risk.is_some_and(|r| r < p)) {
+    if let Some(stop) = eligible.iter().find(|q| q.stops_below(p)) {
         return Some(stop);
     }
     let end = *eligible.last()?;
@@ -169,11 +177,11 @@ fn main() {
         let (mut stops, mut wrong, mut last, mut lowest, mut argmax) = (0, 0, 0, 0, 0);
         for (t, m) in &traces {
             let eligible: Vec<&Point> = t.iter().filter(|q| q.readings >= *m).collect();
-            if let Some(stop) = eligible.iter().find(|q| q.risk.is_some_and(|r| r < p)) {
+            if let Some(stop) = eligible.iter().find(|q| q.stops_below(p)) {
                 stops += 1;
                 wrong += usize::from(!stop.right);
             }
-            let stopped = answer(&eligible, p).filter(|a| a.risk.is_some_and(|r| r < p));
+            let stopped = answer(&eligible, p).filter(|a| a.stops_below(p));
             last += usize::from(stopped.or(t.last()).is_some_and(|q| q.right));
             let answered = answer(&eligible, p).or(t.last());
             lowest += usize::from(answered.is_some_and(|q| q.right));

@@ -20,7 +20,8 @@ use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::registration::pose_distance::PoseDistance;
 use activesense_core::stop::{
-    interpolate_table, AgentTable, StopFeatures, StopModel, AGENT_TABLES, FEATURES, STATED_RISKS,
+    interpolate_table, stop_score, AgentTable, StopFeatures, StopModel, AGENT_TABLES, FEATURES,
+    STATED_RISKS,
 };
 use clap::Args;
 use rayon::prelude::*;
@@ -357,7 +358,13 @@ impl Crossings {
     }
 }
 
-/// The first crossings of `threshold` in `episodes` (readings counted with repeats).
+/// What the threshold table is compared with at `s` ([`stop_score`]).
+fn score(model: &StopModel, s: &Sample) -> f32 {
+    stop_score(model.risk(&s.features), s.features.all_readings())
+}
+
+/// The first crossings of `threshold` by the stop score in `episodes` (readings counted
+/// with repeats).
 fn first_crossings(model: &StopModel, episodes: &[&EpisodeSamples], threshold: f32) -> Crossings {
     let mut c = Crossings {
         stops: 0,
@@ -366,7 +373,7 @@ fn first_crossings(model: &StopModel, episodes: &[&EpisodeSamples], threshold: f
     };
     for s in episodes
         .iter()
-        .filter_map(|e| e.iter().find(|s| model.risk(&s.features) < threshold))
+        .filter_map(|e| e.iter().find(|s| score(model, s) < threshold))
     {
         c.stops += 1;
         c.wrong += s.wrong as usize;
@@ -506,13 +513,13 @@ pub fn markdown(fitted: &[Fitted], command: &str) -> String {
                 obs
             ));
         }
-        s.push_str("\nStopping at the first decision point whose estimate is below the threshold for a stated risk P (the table fitted on the threshold agents' fitting half, checked here on their held-out half):\n\n| stated P | threshold on the estimate | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n");
+        s.push_str("\nStopping at the first decision point whose score (the estimate × 8 / readings, `stop::stop_score`) is below the threshold for a stated risk P (the table fitted on the threshold agents' fitting half, checked here on their held-out half):\n\n| stated P | threshold on the score | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n");
         for &(p, t, n, w, r) in &h.first_crossing {
             s.push_str(&format!("| {p} | {t:.5} | {n} | {w:.4} | {r:.2} |\n"));
         }
         s.push('\n');
         for a in &h.agents {
-            s.push_str(&format!("{}'s own table (fitted on its {} even-plan episodes, checked on its {} odd-plan ones; the stop of this agent uses it):\n\n| stated P | threshold on the estimate | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n", a.agent, a.fit_episodes, a.episodes));
+            s.push_str(&format!("{}'s own table (fitted on its {} even-plan episodes, checked on its {} odd-plan ones; the stop of this agent uses it):\n\n| stated P | threshold on the score | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n", a.agent, a.fit_episodes, a.episodes));
             for &(p, t, n, w, r) in &a.first_crossing {
                 s.push_str(&format!("| {p} | {t:.5} | {n} | {w:.4} | {r:.2} |\n"));
             }
@@ -761,7 +768,8 @@ mod tests {
             features: StopFeatures {
                 peak_mass: risk,
                 entropy: 0.0,
-                readings: 3,
+                // 8 readings: the stop score equals the estimate.
+                readings: 8,
                 repeats: 0,
                 explained: 3,
                 unknowns: 2,

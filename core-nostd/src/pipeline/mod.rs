@@ -260,7 +260,8 @@ impl Pipeline {
                     Some(risk)
                 });
                 let model = StopModel::for_rot_bins(self.params.rot_bins);
-                risk.filter(|&r| model.stops(self.params.agent, r, self.params.config.stop_risk))
+                let (agent, readings) = (self.params.agent, self.observations.len() as u16);
+                risk.filter(|&r| model.stops(agent, r, readings, self.params.config.stop_risk))
                     .map(|_| Stop::Confident)?
             }
             Termination::Oracle => self
@@ -343,11 +344,8 @@ impl Pipeline {
             .iter()
             .filter_map(|&m| self.features_with(peak_mass, refined, m))
             .any(|f| {
-                model.stops(
-                    self.params.agent,
-                    model.risk(&f),
-                    self.params.config.stop_risk,
-                )
+                let p = self.params.config.stop_risk;
+                model.stops(self.params.agent, model.risk(&f), f.all_readings(), p)
             })
     }
 
@@ -924,7 +922,9 @@ pub(crate) mod tests {
         );
         let risk = p.stop_risk_estimate().expect("features agree");
         let model = StopModel::for_rot_bins(params.rot_bins);
-        assert!(risk < model.threshold_for(params.agent, DEFAULT_STOP_RISK));
+        // What the threshold is compared with: the estimate scaled by the readings.
+        let score = crate::stop::stop_score(risk, p.observations().len() as u16);
+        assert!(score < model.threshold_for(params.agent, DEFAULT_STOP_RISK));
         let r = p.finish(&plan);
         assert_eq!(r.recognised, Some(true));
         assert_eq!(
@@ -938,7 +938,7 @@ pub(crate) mod tests {
             "{best:?}"
         );
         // The same readings do not stop at a stated risk whose threshold is below the
-        // estimate, and stop again at one whose threshold is just above it.
+        // score, and stop again at one whose threshold is just above it.
         let stated_with_threshold = |t: f32| {
             // threshold() is non-decreasing in the stated risk: bisect in ln p.
             let (mut lo, mut hi) = (1e-9f32, 1.0f32);
@@ -952,14 +952,14 @@ pub(crate) mod tests {
             }
             (lo, hi)
         };
-        let (below, above) = stated_with_threshold(risk);
+        let (below, above) = stated_with_threshold(score);
         assert!(
-            model.threshold_for(params.agent, below) < risk
-                && model.threshold_for(params.agent, above) >= risk
+            model.threshold_for(params.agent, below) < score
+                && model.threshold_for(params.agent, above) >= score
         );
         p.params.config.stop_risk = below;
         assert_eq!(p.should_stop(), None);
-        p.params.config.stop_risk = stated_with_threshold(risk * 1.01).1;
+        p.params.config.stop_risk = stated_with_threshold(score * 1.01).1;
         assert_eq!(p.should_stop(), Some(Stop::Confident));
 
         // The kept refinement follows the readings: after one more range the pipeline's

@@ -255,7 +255,7 @@ fn print_outcome(t: &Trajectory) {
     }
     match o.stop_risk {
         Some(r) => println!(
-            "estimated risk of a wrong registration: {:.2} % (for a stated risk of {:.2} % the confident stop stops below {:.2} %)",
+            "estimated risk of a wrong registration: {:.2} % (for a stated risk of {:.2} % the confident stop stops where the estimate × 8 / readings is below {:.2} %)",
             100.0 * r,
             100.0 * t.spec.config.stop_risk,
             100.0
