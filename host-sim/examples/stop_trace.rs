@@ -28,6 +28,8 @@ use rayon::prelude::*;
 /// whether the refined pose left the argmax's cell (`None` below the stop gate).
 struct Point {
     readings: usize,
+    /// Distinct bearings the refinement fitted (what the stop score scales by).
+    bearings: u16,
     right: bool,
     argmax_right: bool,
     risk: Option<f32>,
@@ -37,8 +39,7 @@ struct Point {
 impl Point {
     /// The stop's test: the estimate's score ([`stop_score`]) is below the threshold `p`.
     fn stops_below(&self, p: f32) -> bool {
-        self.risk
-            .is_some_and(|r| stop_score(r, self.readings as u16) < p)
+        self.risk.is_some_and(|r| stop_score(r, self.bearings) < p)
     }
 }
 
@@ -68,6 +69,7 @@ fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
                 let f = sp.features;
                 Point {
                     readings: n,
+                    bearings: f.readings,
                     right: right_pose(&sp.pose),
                     argmax_right,
                     risk: Some(StopModel::for_rot_bins(rot_bins).risk(&f)),
@@ -76,6 +78,7 @@ fn trace(plan: u32, rot_bins: u8) -> (Vec<Point>, usize) {
             }
             None => Point {
                 readings: n,
+                bearings: 0,
                 right: match pipe.refine(v.plan) {
                     Ok(r) => right_pose(&r.registration.pose),
                     Err(_) => argmax_right,

@@ -360,7 +360,7 @@ impl Crossings {
 
 /// What the threshold table is compared with at `s` ([`stop_score`]).
 fn score(model: &StopModel, s: &Sample) -> f32 {
-    stop_score(model.risk(&s.features), s.features.all_readings())
+    stop_score(model.risk(&s.features), s.features.readings)
 }
 
 /// The first crossings of `threshold` by the stop score in `episodes` (readings counted
@@ -513,7 +513,7 @@ pub fn markdown(fitted: &[Fitted], command: &str) -> String {
                 obs
             ));
         }
-        s.push_str("\nStopping at the first decision point whose score (the estimate × 8 / readings, `stop::stop_score`) is below the threshold for a stated risk P (the table fitted on the threshold agents' fitting half, checked here on their held-out half):\n\n| stated P | threshold on the score | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n");
+        s.push_str("\nStopping at the first decision point whose score (the estimate × 8 / distinct bearings, `stop::stop_score`) is below the threshold for a stated risk P (the table fitted on the threshold agents' fitting half, checked here on their held-out half):\n\n| stated P | threshold on the score | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n");
         for &(p, t, n, w, r) in &h.first_crossing {
             s.push_str(&format!("| {p} | {t:.5} | {n} | {w:.4} | {r:.2} |\n"));
         }

@@ -253,15 +253,17 @@ impl Pipeline {
         }
         let stop = match self.params.termination {
             Termination::Confident => {
-                let risk = self.stop_gate().and_then(|_| {
+                let estimate = self.stop_gate().and_then(|_| {
                     self.track_refinement();
-                    let risk = self.stop_risk_estimate()?;
+                    let f = self.stop_features()?;
+                    let risk = self.risk_of(&f);
                     self.remember_if_best(risk);
-                    Some(risk)
+                    Some((risk, f.readings))
                 });
                 let model = StopModel::for_rot_bins(self.params.rot_bins);
-                let (agent, readings) = (self.params.agent, self.observations.len() as u16);
-                risk.filter(|&r| model.stops(agent, r, readings, self.params.config.stop_risk))
+                let (agent, p) = (self.params.agent, self.params.config.stop_risk);
+                estimate
+                    .filter(|&(risk, bearings)| model.stops(agent, risk, bearings, p))
                     .map(|_| Stop::Confident)?
             }
             Termination::Oracle => self
@@ -345,7 +347,7 @@ impl Pipeline {
             .filter_map(|&m| self.features_with(peak_mass, refined, m))
             .any(|f| {
                 let p = self.params.config.stop_risk;
-                model.stops(self.params.agent, model.risk(&f), f.all_readings(), p)
+                model.stops(self.params.agent, model.risk(&f), f.readings, p)
             })
     }
 
@@ -923,7 +925,7 @@ pub(crate) mod tests {
         let risk = p.stop_risk_estimate().expect("features agree");
         let model = StopModel::for_rot_bins(params.rot_bins);
         // What the threshold is compared with: the estimate scaled by the readings.
-        let score = crate::stop::stop_score(risk, p.observations().len() as u16);
+        let score = crate::stop::stop_score(risk, f.readings);
         assert!(score < model.threshold_for(params.agent, DEFAULT_STOP_RISK));
         let r = p.finish(&plan);
         assert_eq!(r.recognised, Some(true));

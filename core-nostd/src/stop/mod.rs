@@ -53,8 +53,10 @@ pub const MARGIN_KNEE: f32 = 10.0;
 pub const SCORE_REFERENCE_READINGS: f32 = 8.0;
 
 /// What the threshold table is compared with: the estimate `risk` times
-/// [`SCORE_REFERENCE_READINGS`] / `readings` (every reading, repeats included), so that the
-/// threshold on the estimate grows in proportion to the readings taken.
+/// [`SCORE_REFERENCE_READINGS`] / `bearings` (the distinct bearings measured,
+/// [`StopFeatures::readings`]), so that the threshold on the estimate grows in proportion
+/// to the evidence taken. Repeats do not count: a range repeated at one bearing checks
+/// nothing new, and must not loosen the threshold.
 ///
 /// **Why.** The estimate rises with the readings by itself (the episodes that run long are
 /// the hard ones, and the fit sees it), so a fixed threshold got ever harder to cross, and
@@ -65,8 +67,8 @@ pub const SCORE_REFERENCE_READINGS: f32 = 8.0;
 /// K, the threshold fitted on one half for 1 % and checked on the other) it answered
 /// more episodes with fewer readings at the same or a lower wrong rate
 /// (`docs/EVALUATION.md`, "The stated risk and the threshold").
-pub fn stop_score(risk: f32, readings: u16) -> f32 {
-    risk * SCORE_REFERENCE_READINGS / f32::from(readings.max(1))
+pub fn stop_score(risk: f32, bearings: u16) -> f32 {
+    risk * SCORE_REFERENCE_READINGS / f32::from(bearings.max(1))
 }
 
 /// What the stop estimate looks at, after a measurement.
@@ -112,11 +114,6 @@ pub struct StopFeatures {
 }
 
 impl StopFeatures {
-    /// Every reading taken, repeats included ([`stop_score`] scales by it).
-    pub fn all_readings(&self) -> u16 {
-        self.readings.saturating_add(self.repeats)
-    }
-
     /// The model's input vector: logit of the peak mass, entropy, ln(readings), readings
     /// left unexplained, explained readings beyond the unknowns (capped at 10: the checks
     /// the fit passed), observability, the refined pose's offsets from the argmax (cells,
@@ -223,10 +220,10 @@ impl StopModel {
         interpolate_table(self.table_for(agent), p)
     }
 
-    /// Whether the estimate `risk` after `readings` readings lets `agent`'s stop answer at
-    /// the stated risk `p` (its [`stop_score`] is below the threshold).
-    pub fn stops(&self, agent: AgentKind, risk: f32, readings: u16, p: f32) -> bool {
-        stop_score(risk, readings) < self.threshold_for(agent, p)
+    /// Whether the estimate `risk` after `bearings` distinct bearings lets `agent`'s stop
+    /// answer at the stated risk `p` (its [`stop_score`] is below the threshold).
+    pub fn stops(&self, agent: AgentKind, risk: f32, bearings: u16, p: f32) -> bool {
+        stop_score(risk, bearings) < self.threshold_for(agent, p)
     }
 
     /// The estimated probability that the answered pose's cell is wrong.
