@@ -924,7 +924,7 @@ pub(crate) mod tests {
         );
         let risk = p.stop_risk_estimate().expect("features agree");
         let model = StopModel::for_rot_bins(params.rot_bins);
-        // What the threshold is compared with: the estimate scaled by the readings.
+        // What the threshold is compared with: the estimate scaled by the distinct bearings.
         let score = crate::stop::stop_score(risk, f.readings);
         assert!(score < model.threshold_for(params.agent, DEFAULT_STOP_RISK));
         let r = p.finish(&plan);
@@ -942,7 +942,7 @@ pub(crate) mod tests {
         // The same readings do not stop at a stated risk whose threshold is below the
         // score, and stop again at one whose threshold is just above it.
         let stated_with_threshold = |t: f32| {
-            // threshold() is non-decreasing in the stated risk: bisect in ln p.
+            // threshold_for() is non-decreasing in the stated risk: bisect in ln p.
             let (mut lo, mut hi) = (1e-9f32, 1.0f32);
             for _ in 0..60 {
                 let mid = libm::sqrtf(lo * hi);
