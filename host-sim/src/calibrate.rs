@@ -100,7 +100,7 @@ pub struct Sample {
 }
 
 /// The samples of one episode, in step order.
-type EpisodeSamples = Vec<Sample>;
+pub type EpisodeSamples = Vec<Sample>;
 
 /// An episode's samples with its index in job order (which says the agent).
 type Indexed<'a> = (usize, &'a EpisodeSamples);
@@ -298,7 +298,7 @@ fn first_crossing_check(
         .iter()
         .map(|&p| {
             let t = interpolate_table(table, p);
-            let c = first_crossings(model, episodes, t);
+            let c = first_crossings(episodes, t, |s| score(model, s));
             // Through the shortest decimal of the f32, so the report says 0.001, not 0.0010000000474974513.
             let p64 = format!("{p}").parse().unwrap_or(p as f64);
             (p64, t as f64, c.stops, c.wrong_rate(), c.mean_readings())
@@ -342,18 +342,23 @@ fn held_out(
     }
 }
 
-/// What stopping at the first decision point whose estimate is below a threshold does.
-struct Crossings {
-    stops: usize,
-    wrong: usize,
-    readings: usize,
+/// What stopping at the first decision point whose score is below a threshold does.
+pub struct Crossings {
+    /// Episodes that stopped.
+    pub stops: usize,
+    /// Of those, the ones that stopped wrongly.
+    pub wrong: usize,
+    /// Readings (with repeats) at the stops, summed.
+    pub readings: usize,
 }
 
 impl Crossings {
-    fn wrong_rate(&self) -> f64 {
+    /// Fraction of the stops that were wrong.
+    pub fn wrong_rate(&self) -> f64 {
         self.wrong as f64 / self.stops.max(1) as f64
     }
-    fn mean_readings(&self) -> f64 {
+    /// Mean readings at the stops.
+    pub fn mean_readings(&self) -> f64 {
         self.readings as f64 / self.stops.max(1) as f64
     }
 }
@@ -363,9 +368,13 @@ fn score(model: &StopModel, s: &Sample) -> f32 {
     stop_score(model.risk(&s.features), s.features.readings)
 }
 
-/// The first crossings of `threshold` by the stop score in `episodes` (readings counted
-/// with repeats).
-fn first_crossings(model: &StopModel, episodes: &[&EpisodeSamples], threshold: f32) -> Crossings {
+/// The first crossings of `threshold` by `score` in `episodes` (readings counted with
+/// repeats).
+pub fn first_crossings(
+    episodes: &[&EpisodeSamples],
+    threshold: f32,
+    score: impl Fn(&Sample) -> f32,
+) -> Crossings {
     let mut c = Crossings {
         stops: 0,
         wrong: 0,
@@ -373,7 +382,7 @@ fn first_crossings(model: &StopModel, episodes: &[&EpisodeSamples], threshold: f
     };
     for s in episodes
         .iter()
-        .filter_map(|e| e.iter().find(|s| score(model, s) < threshold))
+        .filter_map(|e| e.iter().find(|s| score(s) < threshold))
     {
         c.stops += 1;
         c.wrong += s.wrong as usize;
@@ -396,11 +405,20 @@ pub fn threshold_table(
     model: &StopModel,
     episodes: &[&EpisodeSamples],
 ) -> [f32; STATED_RISKS.len()] {
+    threshold_table_by(episodes, |s| score(model, s))
+}
+
+/// [`threshold_table`] for any score of a decision point (`examples/stop_score_exponent.rs`
+/// compares scores by it).
+pub fn threshold_table_by(
+    episodes: &[&EpisodeSamples],
+    score: impl Fn(&Sample) -> f32,
+) -> [f32; STATED_RISKS.len()] {
     // The running maximum of the wrong rate over ever larger thresholds.
     let mut envelope = 0.0f64;
     let rates: Vec<(f32, f64)> = candidate_thresholds()
         .map(|t| {
-            envelope = envelope.max(first_crossings(model, episodes, t).wrong_rate());
+            envelope = envelope.max(first_crossings(episodes, t, &score).wrong_rate());
             (t, envelope)
         })
         .collect();

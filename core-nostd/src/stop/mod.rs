@@ -65,7 +65,7 @@ pub const SCORE_REFERENCE_READINGS: f32 = 8.0;
 /// threshold there adds few wrong answers; the table, fitted on first crossings of this
 /// score, keeps the stated risk. On the calibration plans (learnt and heuristic-1, both
 /// K, the threshold fitted on one half for 1 % and checked on the other) it answered
-/// more episodes with fewer readings at the same or a lower wrong rate
+/// as many or more episodes at the same or a lower wrong rate
 /// (`docs/EVALUATION.md`, "The stated risk and the threshold").
 pub fn stop_score(risk: f32, bearings: u16) -> f32 {
     risk * SCORE_REFERENCE_READINGS / f32::from(bearings.max(1))
