@@ -33,8 +33,15 @@ use crate::world::math::{abs, cos, sin, wrap_angle};
 use core::f32::consts::TAU;
 use heapless::Vec as HVec;
 
-/// Belief modes fitted as rivals at most (each is one screened registration).
-pub const MAX_RIVALS: usize = 4;
+/// Belief modes fitted as rivals at most (each is one screened registration). Two, not
+/// four: the third and fourth strongest modes rarely hold the best rival, and their fits
+/// were a third of a K = 10 update on the device. On 1000 validation plans (seeds from
+/// 1001000, before the stop was refitted) the learnt policy's cost and wrong answers moved
+/// by less than their noise (K = 10: 0.652 → 0.650, 4 → 5 wrong of 990), while
+/// `mcu-bench` (learnt-int8, calibrated stop, K = 10) fell from 12.8 M / 59.0 M to
+/// 11.1 M / 39.1 M instructions per update (mean / worst). One rival was too few: 8 wrong
+/// of 990 at K = 10 under the same stop (`docs/LEARNING.md`, "What it costs the instrument").
+pub const MAX_RIVALS: usize = 2;
 
 /// Separation (cells / bins) between the belief modes considered ([`GhtLocalizer::top_modes`]).
 pub const MODE_SEPARATION: u8 = 2;
