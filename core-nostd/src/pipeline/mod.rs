@@ -342,9 +342,17 @@ impl Pipeline {
             return false;
         };
         let model = StopModel::for_rot_bins(self.params.rot_bins);
+        // The features but the margin once: the belief's entropy and the readings'
+        // observability are whole passes, the same for every margin.
+        let Some(f) = self.features_with(peak_mass, refined, 0.0) else {
+            return false;
+        };
         [-rivals::MARGIN_CAP, stop::MARGIN_KNEE, rivals::MARGIN_CAP]
             .iter()
-            .filter_map(|&m| self.features_with(peak_mass, refined, m))
+            .map(|&m| StopFeatures {
+                rival_margin: m,
+                ..f
+            })
             .any(|f| {
                 let p = self.params.config.stop_risk;
                 model.stops(self.params.agent, model.risk(&f), f.readings, p)
