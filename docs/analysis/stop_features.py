@@ -13,8 +13,9 @@ odd half checks. An episode that never stops counts the action limit (100) as it
     python3 docs/analysis/stop_features.py S            # logistic against boosted trees
     python3 docs/analysis/stop_features.py S --history  # with the answer's history features
 
-`--history` needs samples written by a build with `docs/analysis/answer-history.patch` applied
-(it adds `settled_readings` and `answer_step` to the features). Needs numpy and scikit-learn.
+`--history` needs samples written by a build with `docs/analysis/answer-history.patch` or
+`docs/analysis/argmax-history.patch` applied (each adds `settled_readings` and `answer_step` to the
+features: of the answer, or of the belief argmax). Needs numpy and scikit-learn.
 """
 
 import json
