@@ -141,6 +141,10 @@ pub struct Pipeline {
     /// The rival margin of `last_refinement` ([`rivals::check`]), computed with it (4 bytes
     /// of static RAM: the answer itself is `last_refinement`).
     last_margin: Option<f32>,
+    /// The belief's entropy and the readings' observability at the argmax for the state
+    /// they saw ([`Pipeline::belief_summary`]): the stop's features read them twice per
+    /// reading and its kept answer once more, and the entropy is a pass over every cell.
+    belief_summary: Option<((usize, u32), f32, Option<Observability>)>,
     /// The last refinements at other belief modes, newest first
     /// ([`refine::keep_alternate`]): a carried re-fit may start from them when the argmax
     /// returns to one.
@@ -188,6 +192,7 @@ impl Pipeline {
             ready: false,
             last_refinement: None,
             last_margin: None,
+            belief_summary: None,
             alternate_refinements: [None; refine::ALTERNATE_MODES],
             best_answer: None,
         }
@@ -224,6 +229,7 @@ impl Pipeline {
         self.observations.clear();
         self.last_refinement = None;
         self.last_margin = None;
+        self.belief_summary = None;
         self.alternate_refinements = [None; refine::ALTERNATE_MODES];
         self.best_answer = None;
         self.params = *params;
@@ -300,6 +306,9 @@ impl Pipeline {
         let key = self.refinement_key();
         if self.last_refinement.is_some_and(|(k, _)| k == key) {
             return;
+        }
+        if self.params.termination == Termination::Confident {
+            self.belief_summary = Some((key, self.localizer.entropy(), self.observability()));
         }
         let input = self.refine_input(&self.plan);
         let budget = Budget::per_reading(self.params.heading_known());
@@ -397,7 +406,7 @@ impl Pipeline {
             risk,
             cell,
             refinement,
-            observability: self.observability(),
+            observability: self.belief_summary().1,
             readings: self.observations.len() as u16,
         });
     }
@@ -460,12 +469,12 @@ impl Pipeline {
         };
         Some(StopFeatures {
             peak_mass,
-            entropy: self.localizer.entropy(),
+            entropy: self.belief_summary().0,
             readings: refined.fit.bearings,
             repeats: (self.observations.len() as u16).saturating_sub(refined.fit.bearings),
             explained: refined.fit.explained_bearings,
             unknowns: self.min_measurements() as u8,
-            observability: self.observability().map_or(0.0, |o| o.min_eigenvalue),
+            observability: self.belief_summary().1.map_or(0.0, |o| o.min_eigenvalue),
             offset_cells,
             offset_bins,
             edge_margin: {
@@ -479,6 +488,18 @@ impl Pipeline {
             }),
             rival_margin,
         })
+    }
+
+    /// The belief's entropy and the readings' observability ([`Pipeline::observability`]):
+    /// the ones kept for this state when the confident rule computed them, else computed
+    /// (the same values either way).
+    fn belief_summary(&self) -> (f32, Option<Observability>) {
+        match self.belief_summary {
+            Some((key, entropy, observability)) if key == self.refinement_key() => {
+                (entropy, observability)
+            }
+            _ => (self.localizer.entropy(), self.observability()),
+        }
     }
 
     /// The calibrated estimate of the probability that the answer is wrong: that the cell
