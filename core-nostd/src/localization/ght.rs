@@ -905,14 +905,41 @@ impl GhtLocalizer {
 
     /// Up to `N` modes, strongest first, separated by more than `min_separation` cells /
     /// bins (see [`grid::top_modes`]).
+    ///
+    /// The same modes as [`grid::top_modes_by`] over [`GhtLocalizer::weight`], found by
+    /// comparing levels in [`GhtLocalizer::for_each_level`]'s walk: the weight is
+    /// `(level + base) / VOTE_QUANTA`, increasing in the level, and a cell outside the room
+    /// holds level 0, so the same cell wins every comparison, without a division per cell
+    /// (issue 22: the rival search takes four modes after every reading past the stop gate,
+    /// four passes over 9 000 cells at K = 10; `top_modes_match_the_weight_scan` in the
+    /// tests).
     pub fn top_modes<const N: usize>(&self, min_separation: u8) -> HVec<Mode, N> {
-        grid::top_modes_by(
-            &self.grid,
-            self.grid.len(),
-            |i| self.weight(i),
-            min_separation,
-            |i| self.prob(i),
-        )
+        let mut out: HVec<Mode, N> = HVec::new();
+        while !out.is_full() {
+            let mut best: Option<(usize, u8)> = None;
+            self.for_each_level(|i, level| {
+                let v = level.unwrap_or(0);
+                if v as u32 + self.base == 0 || best.is_some_and(|(_, b)| v <= b) {
+                    return;
+                }
+                let c = self.grid.cell_at(i);
+                if out
+                    .iter()
+                    .any(|m| self.grid.near(m.cell, c, min_separation))
+                {
+                    return;
+                }
+                best = Some((i, v));
+            });
+            let Some((i, _)) = best else { break };
+            let cell = self.grid.cell_at(i);
+            let _ = out.push(Mode {
+                cell,
+                pose: self.grid.pose_of(cell),
+                mass: self.prob(i),
+            });
+        }
+        out
     }
 
     /// The coarse-success test of the argmax against a ground-truth AgentPose

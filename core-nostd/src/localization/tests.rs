@@ -735,3 +735,32 @@ fn interleaved_levels_equal_for_each_level() {
         );
     }
 }
+
+/// `GhtLocalizer::top_modes` (a walk comparing levels) finds the modes the scan of the
+/// weights (`grid::top_modes_by`) finds, before and after the accumulator rebases, with
+/// the heading known and unknown, at every number of modes asked for.
+#[test]
+fn top_modes_match_the_weight_scan() {
+    let scan = |l: &GhtLocalizer| {
+        grid::top_modes_by::<4, _, _>(l.grid(), l.grid().len(), |i| l.weight(i), 2, |i| l.prob(i))
+    };
+    let mut rng = Pcg32::seed_from_u64(7);
+    for (p, truth) in asymmetric_cases() {
+        for cfg in [
+            LocalizerConfig::DEFAULT,
+            LocalizerConfig::known_heading(truth.theta),
+        ] {
+            let mut l = boxed(&p, &cfg);
+            assert_eq!(l.top_modes::<4>(2), scan(&l), "no vote yet");
+            let mut rebased = false;
+            for _ in 0..40 {
+                feed_noisy(&mut l, &p, &truth, 3, 0.02, &mut rng);
+                assert_eq!(l.top_modes::<4>(2), scan(&l));
+                assert_eq!(l.top_modes::<1>(2)[..], scan(&l)[..1]);
+                // Cells outside the room hold level 0: a positive least weight is the base.
+                rebased |= l.weights().fold(f32::INFINITY, f32::min) > 0.0;
+            }
+            assert!(rebased, "the accumulator rebased at least once");
+        }
+    }
+}
