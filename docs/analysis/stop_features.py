@@ -52,7 +52,16 @@ def features(f):
     return [np.log(p / (1 - p)), f["entropy"], np.log(r), unexplained, checks, f["observability"],
             f["offset_cells"], f["offset_bins"], np.exp(-max(f["edge_margin"], 0) / 0.02),
             unexplained / r, f["repeats"] / r, 0 if f["agrees"] else 1, min(m, 10) / 10,
-            max(m - 10, 0) / 10]
+            max(m - 10, 0) / 10] + precision(f)
+
+
+def precision(f):
+    """The answer's precision: none, and ln(sigma / tolerance) of position and heading."""
+    p = f.get("precision")
+    if p is None:
+        return [1.0, 0.0, 0.0]
+    ratio = lambda s, t: np.log(min(max(s / t, 1e-3), 10.0))
+    return [0.0, ratio(p["position"], 0.05), ratio(p["heading"], np.radians(0.5))]
 
 
 def with_history(f):

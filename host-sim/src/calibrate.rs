@@ -97,6 +97,13 @@ pub struct Sample {
     pub features: StopFeatures,
     /// The answer (the refined pose) is outside the tolerance of the truth.
     pub wrong: bool,
+    /// How far the answer lies from the truth (m; at the nearest symmetric equivalent), for
+    /// the analyses in `docs/analysis/`.
+    #[serde(default)]
+    pub position_error: f32,
+    /// The answer's heading error (degrees, at the same equivalent).
+    #[serde(default)]
+    pub heading_error_deg: f32,
 }
 
 /// The samples of one episode, in step order.
@@ -141,6 +148,8 @@ pub fn collect(
                         plan: i,
                         features: point.features,
                         wrong: !tolerance.admits(&errors),
+                        position_error: errors.position,
+                        heading_error_deg: errors.heading.to_degrees(),
                     });
                 }
             })
@@ -517,7 +526,7 @@ fn thresholds_source(t: &[f32; STATED_RISKS.len()], indent: &str) -> String {
 pub fn markdown(fitted: &[Fitted], command: &str) -> String {
     let mut s = String::from("# Calibrated stop: fit and held-out check\n\n");
     s.push_str(&format!("Produced by `{command}`.\n\n"));
-    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the edge of the refined pose's cell, fraction of bearings unexplained, repeated readings per bearing, refined pose and argmax disagree, the likelihood margin over the best rival belief mode below and above 10 nats (`core-nostd/src/stop/mod.rs`; readings and explained readings are counted per distinct bearing).\n\n");
+    s.push_str("Features: logit of the peak mass, entropy, ln(readings), readings the refined pose leaves unexplained, explained readings beyond the unknowns, observability, the refined pose's offset from the argmax in cells and in bins, closeness to the edge of the refined pose's cell, fraction of bearings unexplained, repeated readings per bearing, refined pose and argmax disagree, the likelihood margin over the best rival belief mode below and above 10 nats, whether the readings the refined pose explains leave it without a precision, and the logs of its position and heading standard deviations over 5 cm and 0.5° (`core-nostd/src/stop/mod.rs`; readings and explained readings are counted per distinct bearing).\n\n");
     for f in fitted {
         let h = &f.held_out;
         s.push_str(&format!(
@@ -807,8 +816,11 @@ mod tests {
                 edge_margin: 0.0,
                 agrees: true,
                 rival_margin: 0.0,
+                precision: None,
             },
             wrong,
+            position_error: 0.0,
+            heading_error_deg: 0.0,
         };
         let episodes: Vec<EpisodeSamples> = (0..100)
             .map(|i| vec![point(0.6, i < 50), point(0.05, i < 10), point(0.001, false)])

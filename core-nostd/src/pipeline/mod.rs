@@ -487,6 +487,24 @@ impl Pipeline {
                 c.ix == argmax.ix && c.iy == argmax.iy && grid.bin_distance(c.bin, argmax.bin) <= 1
             }),
             rival_margin,
+            precision: self.answer_precision(&pose),
+        })
+    }
+
+    /// [`stop::AnswerPrecision`] of the answer `pose` from the readings it explains.
+    fn answer_precision(&self, pose: &Pose2) -> Option<stop::AnswerPrecision> {
+        let cov = crate::registration::precision::pose_covariance(
+            &self.plan,
+            &self.observations,
+            pose,
+            self.params.heading_known(),
+            stop::PRECISION_SIGMA,
+            stop::PRECISION_GATE,
+        )
+        .ok()?;
+        Some(stop::AnswerPrecision {
+            position: crate::world::math::sqrt((cov.cov[0][0] + cov.cov[1][1]).max(0.0)),
+            heading: cov.sigma_heading(),
         })
     }
 

@@ -29,6 +29,7 @@ pub mod calibration;
 pub mod rivals;
 
 use crate::episode::AgentKind;
+use crate::registration::pose_distance::Tolerance;
 use crate::world::math::{exp, ln};
 use serde::{Deserialize, Serialize};
 
@@ -43,7 +44,16 @@ pub const GATE_PEAK_MASS: f32 = 0.1;
 pub const EDGE_SCALE: f32 = 0.02;
 
 /// Number of features of [`StopFeatures::to_vector`].
-pub const FEATURES: usize = 14;
+pub const FEATURES: usize = 17;
+
+/// Range noise (m) the answer's precision ([`StopFeatures::precision`]) is computed with: the
+/// EDM's own σ. Only the ratio between answers matters to the fitted model.
+pub const PRECISION_SIGMA: f32 = 0.01;
+
+/// Range residual (m) within which a reading counts towards the answer's precision: the
+/// 3σ of the range model that says which readings a pose explains
+/// ([`crate::registration::RangeModel`]).
+pub const PRECISION_GATE: f32 = 0.09;
 
 /// Knee of the rival margin's two pieces (nats): about one reading a rival cannot explain
 /// ([`rivals`]).
@@ -111,6 +121,28 @@ pub struct StopFeatures {
     /// ([`rivals::check`]); 0 when the rivals were not searched.
     #[serde(default)]
     pub rival_margin: f32,
+    /// How precisely the readings the answer explains fix it ([`AnswerPrecision`]); `None`
+    /// when they leave a direction free.
+    #[serde(default)]
+    pub precision: Option<AnswerPrecision>,
+}
+
+/// Standard deviations of the answer from the information of the readings it explains
+/// ([`crate::registration::precision::pose_covariance`] at [`PRECISION_SIGMA`]).
+///
+/// **Why the stop reads them.** Most wrong answers at K = 10 were not another pose: they
+/// were the right one, off by 0.5–1.3° in heading or by 5–50 cm (27 of 36 wrong first
+/// stops on the calibration plans). Every reading is explained (3σ of the range model is
+/// 9 cm), and the rivals are beaten, so nothing else the stop reads can tell them from a
+/// right answer; how tightly the readings' geometry pins the pose can. With these features
+/// the logistic model reaches 1 % wrong first stops 0.9 ranges earlier on the learnt
+/// policy's K = 10 calibration episodes (`docs/EVALUATION.md`, "The answer's precision").
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AnswerPrecision {
+    /// Of the position, `√(σx² + σy²)` (m).
+    pub position: f32,
+    /// Of the heading (rad; 0 when it is known).
+    pub heading: f32,
 }
 
 impl StopFeatures {
@@ -122,6 +154,9 @@ impl StopFeatures {
     /// refined pose and the argmax disagree, and the rival margin in two linear pieces
     /// (below and above [`MARGIN_KNEE`], in tens of nats): a logistic model cannot bend by
     /// itself, and the first unexplained reading of a rival is worth more than the rest.
+    /// Then the answer's precision: whether it has none, and the logs of its position and
+    /// heading standard deviations in units of the surveyor's tolerance (5 cm, 0.5°),
+    /// clamped to [10⁻³, 10].
     pub fn to_vector(&self) -> [f32; FEATURES] {
         let m = if self.rival_margin.is_nan() {
             0.0
@@ -147,8 +182,25 @@ impl StopFeatures {
             if self.agrees { 0.0 } else { 1.0 },
             m.min(MARGIN_KNEE) / 10.0,
             (m - MARGIN_KNEE).max(0.0) / 10.0,
+            if self.precision.is_some() { 0.0 } else { 1.0 },
+            self.precision.map_or(0.0, |p| {
+                log_ratio(p.position, Tolerance::SURVEYOR.position_m)
+            }),
+            self.precision.map_or(0.0, |p| {
+                log_ratio(p.heading, Tolerance::SURVEYOR.heading_rad)
+            }),
         ]
     }
+}
+
+/// `ln(sigma / tolerance)`, the ratio clamped to [10⁻³, 10] (a NaN reads as the upper end).
+fn log_ratio(sigma: f32, tolerance: f32) -> f32 {
+    let r = sigma / tolerance;
+    ln(if r.is_nan() {
+        10.0
+    } else {
+        r.clamp(1e-3, 10.0)
+    })
 }
 
 /// The stated risks of [`StopModel::thresholds`] (the frontier's settings).
@@ -295,6 +347,7 @@ mod tests {
             edge_margin: 0.1,
             agrees: true,
             rival_margin: 12.0,
+            precision: None,
         }
     }
 
@@ -303,7 +356,8 @@ mod tests {
         let m = StopModel {
             rot_bins: 10,
             weights: [
-                -1.0, 0.0, 0.0, 2.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                -1.0, 0.0, 0.0, 2.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                0.0,
             ],
             bias: 0.5,
             thresholds: [0.001, 0.003, 0.01, 0.03, 0.1],
@@ -324,6 +378,45 @@ mod tests {
             ..m
         };
         assert_eq!(extreme.risk(&features(1.0, 500, 500)), 0.0);
+    }
+
+    #[test]
+    fn the_precision_features_are_logs_of_the_tolerance_ratio() {
+        let last3 = |f: &StopFeatures| {
+            let v = f.to_vector();
+            [v[FEATURES - 3], v[FEATURES - 2], v[FEATURES - 1]]
+        };
+        // No precision: the flag, and the logs read zero.
+        assert_eq!(last3(&features(0.9, 8, 8)), [1.0, 0.0, 0.0]);
+        // At the tolerance itself (5 cm, 0.5°) both logs are 0; a tenth is ln 0.1.
+        let mut f = features(0.9, 8, 8);
+        f.precision = Some(AnswerPrecision {
+            position: 0.05,
+            heading: 0.5f32.to_radians(),
+        });
+        let v = last3(&f);
+        assert_eq!(v[0], 0.0);
+        assert!(v[1].abs() < 1e-5 && v[2].abs() < 1e-5, "{v:?}");
+        f.precision = Some(AnswerPrecision {
+            position: 0.005,
+            heading: 0.05f32.to_radians(),
+        });
+        let v = last3(&f);
+        assert!((v[1] - 0.1f32.ln()).abs() < 1e-4 && (v[2] - 0.1f32.ln()).abs() < 1e-4);
+        // A known heading (σ = 0), a huge σ and a NaN stay finite: clamped to [1e-3, 10].
+        f.precision = Some(AnswerPrecision {
+            position: f32::NAN,
+            heading: 0.0,
+        });
+        let v = last3(&f);
+        assert!((v[1] - 10f32.ln()).abs() < 1e-5, "{v:?}");
+        assert!((v[2] - 1e-3f32.ln()).abs() < 1e-4, "{v:?}");
+        f.precision = Some(AnswerPrecision {
+            position: 1e9,
+            heading: f32::INFINITY,
+        });
+        let v = last3(&f);
+        assert!((v[1] - 10f32.ln()).abs() < 1e-5 && (v[2] - 10f32.ln()).abs() < 1e-5);
     }
 
     #[test]
