@@ -520,9 +520,9 @@ impl Pipeline {
         }
     }
 
-    /// The calibrated estimate of the probability that the answer is wrong: that the cell
-    /// the refined pose lies in is not a coarse success ([`StopModel::for_rot_bins`] on
-    /// [`Pipeline::stop_features`]); `None` when there are no features yet.
+    /// The calibrated estimate of the probability that the answer is wrong: that the refined
+    /// pose lies outside the surveyor's tolerance of the truth ([`StopModel::for_rot_bins`]
+    /// on [`Pipeline::stop_features`]); `None` when there are no features yet.
     pub fn stop_risk_estimate(&self) -> Option<f32> {
         Some(self.risk_of(&self.stop_features()?))
     }
