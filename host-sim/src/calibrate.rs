@@ -283,16 +283,20 @@ pub struct HeldOut {
 /// of it, fraction of those that stopped wrongly, mean readings at the stop).
 pub type FirstCrossing = (f64, f64, usize, f64, f64);
 
-/// The held-out check of one agent's own threshold table.
+/// The check of one agent's own threshold table. The table is placed on all of the agent's
+/// episodes (its thresholds rest on a few dozen wrong first crossings, so every episode
+/// counts); the check is cross-fitted: a table placed on the even-plan half is checked on
+/// the odd half and the other way round, pooled.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct AgentCheck {
     /// The agent's name.
     pub agent: String,
-    /// Episodes the table was fitted on.
+    /// Episodes the table was placed on (all of them).
     pub fit_episodes: usize,
-    /// Held-out episodes.
+    /// Episodes of the cross-fitted check (each checked once, by the other half's table).
     pub episodes: usize,
-    /// As [`HeldOut::first_crossing`].
+    /// As [`HeldOut::first_crossing`], with the committed table's thresholds and the
+    /// cross-fitted halves' stops pooled.
     pub first_crossing: Vec<FirstCrossing>,
 }
 
@@ -311,6 +315,34 @@ fn first_crossing_check(
             // Through the shortest decimal of the f32, so the report says 0.001, not 0.0010000000474974513.
             let p64 = format!("{p}").parse().unwrap_or(p as f64);
             (p64, t as f64, c.stops, c.wrong_rate(), c.mean_readings())
+        })
+        .collect()
+}
+
+/// [`first_crossing_check`] cross-fitted: a table placed on `a` checked on `b`, and one
+/// placed on `b` checked on `a`, pooled; the threshold column is `table`'s.
+fn cross_fitted_check(
+    model: &StopModel,
+    table: &[f32; STATED_RISKS.len()],
+    a: &[&EpisodeSamples],
+    b: &[&EpisodeSamples],
+) -> Vec<FirstCrossing> {
+    let ab = first_crossing_check(model, &threshold_table(model, a), b);
+    let ba = first_crossing_check(model, &threshold_table(model, b), a);
+    ab.iter()
+        .zip(&ba)
+        .zip(STATED_RISKS)
+        .map(|((&(p, _, n1, w1, r1), &(_, _, n2, w2, r2)), risk)| {
+            let n = n1 + n2;
+            let pool = |x1: f64, x2: f64| {
+                if n == 0 {
+                    0.0
+                } else {
+                    (x1 * n1 as f64 + x2 * n2 as f64) / n as f64
+                }
+            };
+            let t = interpolate_table(table, risk) as f64;
+            (p, t, n, pool(w1, w2), pool(r1, r2))
         })
         .collect()
 }
@@ -556,7 +588,7 @@ pub fn markdown(fitted: &[Fitted], command: &str) -> String {
         }
         s.push('\n');
         for a in &h.agents {
-            s.push_str(&format!("{}'s own table (fitted on its {} even-plan episodes, checked on its {} odd-plan ones; the stop of this agent uses it):\n\n| stated P | threshold on the score | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n", a.agent, a.fit_episodes, a.episodes));
+            s.push_str(&format!("{}'s own table (placed on all its {} episodes; the stop of this agent uses it), checked by cross-fitting: a table placed on the even-plan half checked on the odd half and the other way round, {} episodes pooled:\n\n| stated P | threshold on the score | episodes stopped | of which wrong | readings at the stop |\n|---|---|---|---|---|\n", a.agent, a.fit_episodes, a.episodes));
             for &(p, t, n, w, r) in &a.first_crossing {
                 s.push_str(&format!("| {p} | {t:.5} | {n} | {w:.4} | {r:.2} |\n"));
             }
@@ -726,13 +758,14 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
                 .chain(&extra)
                 .filter(|e| !e.is_empty())
                 .partition(|e| e[0].plan % 2 == 0);
-            let thresholds = threshold_table(&model, &fit);
+            let all: Vec<&EpisodeSamples> = fit.iter().chain(&check).copied().collect();
+            let thresholds = threshold_table(&model, &all);
             model.agent_tables[slot] = Some(AgentTable { agent, thresholds });
             checks.push(AgentCheck {
                 agent: agent.name().to_string(),
-                fit_episodes: fit.len(),
-                episodes: check.len(),
-                first_crossing: first_crossing_check(&model, &thresholds, &check),
+                fit_episodes: all.len(),
+                episodes: all.len(),
+                first_crossing: cross_fitted_check(&model, &thresholds, &fit, &check),
             });
         }
         let mut held_out = held_out(&model, &check, &threshold_check);
@@ -847,6 +880,18 @@ mod tests {
         );
         let at_10 = h.first_crossing.iter().find(|r| r.0 == 0.1).unwrap();
         assert_eq!((at_10.2, at_10.3), (100, 0.1));
+        // Cross-fitted, each half checks the other half's table. The odd half is never
+        // wrong, so its table stops at the first reading, and the even half, wrong there
+        // every time, answers wrongly in all 50: half of the 100 pooled stops. The
+        // threshold column is the committed table's own.
+        let (even, odd) = refs.split_at(50);
+        let c = cross_fitted_check(&model, &t, even, odd);
+        let at_10 = c.iter().find(|r| r.0 == 0.1).unwrap();
+        assert_eq!(
+            (at_10.1, at_10.2),
+            (f64::from(interpolate_table(&t, 0.1)), 100)
+        );
+        assert!((at_10.3 - 0.5).abs() < 1e-9, "{at_10:?}");
     }
 
     /// The generated source is the committed file byte for byte: regenerating the

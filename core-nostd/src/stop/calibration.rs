@@ -41,11 +41,11 @@ pub const MODELS: &[StopModel] = &[
         agent_tables: [
             Some(AgentTable {
                 agent: AgentKind::Learnt,
-                thresholds: [0.0024912255, 0.006585353, 0.020665456, 0.5861284, 0.9],
+                thresholds: [0.0033157328, 0.00901908, 0.022516191, 0.55355334, 0.9],
             }),
             Some(AgentTable {
                 agent: AgentKind::Heuristic1,
-                thresholds: [0.004050383, 0.008044437, 0.016440379, 0.4798177, 0.9],
+                thresholds: [0.0035108544, 0.0053909156, 0.013458457, 0.41590393, 0.9],
             }),
         ],
     },
@@ -83,21 +83,21 @@ pub const MODELS: &[StopModel] = &[
             Some(AgentTable {
                 agent: AgentKind::Learnt,
                 thresholds: [
-                    0.0011512338,
-                    0.0022864572,
-                    0.028302716,
-                    0.06866638,
-                    0.39278936,
+                    0.0015322514,
+                    0.014663756,
+                    0.030837422,
+                    0.07921865,
+                    0.41590393,
                 ],
             }),
             Some(AgentTable {
                 agent: AgentKind::Heuristic1,
                 thresholds: [
-                    0.0011512338,
-                    0.005708156,
-                    0.033599127,
-                    0.06866638,
-                    0.4279664,
+                    0.0039362204,
+                    0.014663756,
+                    0.035576344,
+                    0.074815944,
+                    0.41590393,
                 ],
             }),
         ],
