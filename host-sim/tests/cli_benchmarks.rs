@@ -317,11 +317,15 @@ fn calibrate_writes_models_and_a_held_out_report() {
     }
     let md = std::fs::read_to_string(out.join("calibration.md")).unwrap();
     assert!(md.contains("## K = 1") && md.contains("## K = 10") && md.contains("episodes stopped"));
-    // Its own table: 5 even- and 5 odd-indexed plans of 10 (those with a decision point).
+    // Its own table: placed on all 10 plans (those with a decision point), and each of
+    // them checked once by the cross-fit (the other half's table).
     assert!(md.contains("heuristic-1's own table"), "{md}");
+    assert!(md.contains("checked by cross-fitting"), "{md}");
     let own = &json[0]["held_out"]["agents"][0];
     assert_eq!(own["agent"], "heuristic-1");
-    assert!(own["fit_episodes"].as_u64().unwrap() <= 5);
+    let placed_on = own["fit_episodes"].as_u64().unwrap();
+    assert!((1..=10).contains(&placed_on), "{own}");
+    assert_eq!(own["episodes"].as_u64().unwrap(), placed_on);
 
     let bad = activesense(&["calibrate", "--plans", "1", "--rust-out", s(&rust)]);
     assert!(!bad.status.success());
