@@ -12,6 +12,8 @@ odd half checks. An episode that never stops counts the action limit (100) as it
         --samples-out S --rust-out /tmp/cal.rs --out /tmp/cal
     python3 docs/analysis/stop_features.py S            # logistic against boosted trees
     python3 docs/analysis/stop_features.py S --history  # with the answer's history features
+    python3 docs/analysis/stop_features.py S --quarters # the logistic model over four splits, with and
+                                                        # without the previous decision point's margin
 
 `--history` needs samples written by a build with `docs/analysis/answer-history.patch` or
 `docs/analysis/argmax-history.patch` applied (each adds `settled_readings` and `answer_step` to the
@@ -119,8 +121,48 @@ def xy(episodes, plans, vec):
     return np.array(x), np.array(y)
 
 
+def with_previous(f, prev):
+    """`features` and the previous decision point's rival margin (in the margin's two pieces) and a
+    flag where there is none (docs/analysis/previous-margin.patch)."""
+    if prev is None:
+        return features(f) + [0.0, 0.0, 1.0]
+    m = margin(prev)
+    return features(f) + [min(m, 10) / 10, max(m - 10, 0) / 10, 0.0]
+
+
+def quarters(episodes):
+    """The logistic model on four splits of the plans (docs/EVALUATION.md, "A rival fitted from every
+    heading start"): for k = 0..3 it is fitted on the plans with index = k (mod 4), and the ranges at
+    its best threshold for at most 1 % wrong first stops are taken on the other three quarters; the
+    mean over the four splits, with and without the previous decision point's margin."""
+    plans = sorted(episodes)
+    rows = {
+        "features": {p: np.array([features(d["features"]) for d in episodes[p]]) for p in plans},
+        "+ previous margin": {
+            p: np.array([with_previous(d["features"], episodes[p][i - 1]["features"] if i else None)
+                         for i, d in enumerate(episodes[p])]) for p in plans},
+    }
+    for name, x in rows.items():
+        best = []
+        for k in range(4):
+            fit = [p for p in plans if p % 4 == k]
+            rest = [p for p in plans if p % 4 != k]
+            y = np.array([d["wrong"] for p in fit for d in episodes[p]])
+            model = LogisticRegression(C=1e3, max_iter=5000).fit(np.concatenate([x[p] for p in fit]), y)
+            s = {p: model.predict_proba(x[p])[:, 1] * 8
+                 / np.maximum([d["features"]["readings"] for d in episodes[p]], 1) for p in plans}
+            ok = [m for t in np.geomspace(1e-4, 2.0, 160)
+                  for a, w, m in [first_stops(episodes, rest, s, t)] if a and w / a <= 0.01]
+            best.append(min(ok) if ok else float("nan"))
+        print(f"{name:20s} ranges at <= 1 % wrong first stops, best threshold, per split: "
+              + " ".join(f"{b:.2f}" for b in best) + f"; mean {np.mean(best):.2f}", flush=True)
+
+
 def main():
     episodes = load(sys.argv[1])
+    if "--quarters" in sys.argv:
+        quarters(episodes)
+        return
     history = "--history" in sys.argv
     plans = sorted(episodes)
     fit = [p for p in plans if p % 4 == 0]
