@@ -90,7 +90,7 @@ pub const STEPS: &[Step] = &[
     cli("int8-k1", "policies/k1", &["policy", "quantize", "--policy", "policies/k1/policy.policy", "--out", "policies/k1/policy.q8"], 1),
     cli("int8-k10", "policies/k10", &["policy", "quantize", "--policy", "policies/k10/policy.policy", "--out", "policies/k10/policy.q8"], 2),
     cli("agreement", "results", &["policy", "agreement", "--rot-bins", "1,10", "--plans", "200", "--int8", "policies/k1/policy.q8", "--int8", "policies/k10/policy.q8", "--json", "results/policy-agreement.json"], 60),
-    Step { rebuilds: true, ..cli("calibration", "results/calibration", &["calibrate"], 610) },
+    Step { rebuilds: true, ..cli("calibration", "results/calibration", &["calibrate"], 720) },
     cli("main-job", "results", &["eval", "--agents", "all", "--rot-bins", "1,10", "--plans", "1000", "--with-no-oracle", "--out", "results/", "--no-progress"], 100),
     cli("confident", "results/confident", &["eval", "--agents", "heuristic-1,learnt,learnt-int8,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--curve-plans", "0", "--out", "results/confident"], 100),
     cli("frontier", "results/frontier", &["eval", "--agents", "learnt,heuristic-1,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--stop-risks", "0.001,0.003,0.01,0.03,0.1", "--curve-plans", "0", "--no-progress", "--out", "results/frontier"], 430),

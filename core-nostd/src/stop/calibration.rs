@@ -41,11 +41,11 @@ pub const MODELS: &[StopModel] = &[
         agent_tables: [
             Some(AgentTable {
                 agent: AgentKind::Learnt,
-                thresholds: [0.0033157328, 0.00901908, 0.022516191, 0.55355334, 0.9],
+                thresholds: [0.0045411168, 0.00901908, 0.037669912, 0.60312796, 0.9],
             }),
             Some(AgentTable {
                 agent: AgentKind::Heuristic1,
-                thresholds: [0.0035108544, 0.0053909156, 0.013458457, 0.41590393, 0.9],
+                thresholds: [0.003411899, 0.0053909156, 0.01425045, 0.49373385, 0.9],
             }),
         ],
     },
@@ -83,21 +83,21 @@ pub const MODELS: &[StopModel] = &[
             Some(AgentTable {
                 agent: AgentKind::Learnt,
                 thresholds: [
-                    0.0018189884,
-                    0.013079123,
-                    0.036608163,
-                    0.07921865,
-                    0.45315102,
+                    0.004413123,
+                    0.013458457,
+                    0.041043513,
+                    0.08388045,
+                    0.46629375,
                 ],
             }),
             Some(AgentTable {
                 agent: AgentKind::Heuristic1,
                 thresholds: [
-                    0.0039362204,
-                    0.013079123,
+                    0.0042887363,
+                    0.012710481,
                     0.033599127,
-                    0.074815944,
-                    0.46629375,
+                    0.07698583,
+                    0.45315102,
                 ],
             }),
         ],

@@ -69,8 +69,9 @@ pub struct CalibrateArgs {
     /// Calibration plans per setting for the agents of --agent-tables (at least --plans;
     /// the first --plans are the pooled fit's episodes, the rest run for the table alone).
     /// One agent's 500 fitting episodes hold about five wrong stops at 1 %, too few to
-    /// place its threshold by (`docs/EVALUATION.md`).
-    #[arg(long, default_value_t = 4000)]
+    /// place its threshold by, and 4000 held about four at 0.1 % (`docs/EVALUATION.md`,
+    /// "Twelve thousand episodes per table").
+    #[arg(long, default_value_t = 12000)]
     pub agent_table_plans: u32,
     /// Ridge (L2) penalty on the weights.
     #[arg(long, default_value_t = 1e-3)]

@@ -12,7 +12,7 @@ use clap::{Args, FromArgMatches};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 
-/// Every hyper-parameter of a training run. The first fourteen are `activesense train` flags
+/// Every hyper-parameter of a training run. The first fifteen are `activesense train` flags
 /// (doc comment = help text); the others are fixed.
 #[derive(Args, Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HyperParams {
@@ -45,6 +45,12 @@ pub struct HyperParams {
     /// Adam learning rate.
     #[arg(long = "lr", value_name = "LR", default_value_t = 3e-4)]
     pub learning_rate: f32,
+    /// Anneal the A2C phase's learning rate linearly from --lr at its first update to
+    /// --lr / (A2C updates) at the last (CleanRL's `anneal_lr`): the late updates refine
+    /// instead of wandering.
+    #[arg(long, default_value_t = false)]
+    #[serde(default)]
+    pub anneal_lr: bool,
     /// Entropy bonus coefficient.
     #[arg(long, default_value_t = 0.01)]
     pub ent_coef: f32,
@@ -156,6 +162,18 @@ impl HyperParams {
         }
     }
 
+    /// The Adam learning rate of A2C update `update` (1-based, counted with the imitation
+    /// updates): `learning_rate`, or with `anneal_lr` its linear decay over the A2C updates.
+    pub fn a2c_learning_rate(&self, update: u64) -> f32 {
+        if !self.anneal_lr {
+            return self.learning_rate;
+        }
+        let first = self.imitation_updates + 1;
+        let total = self.updates.saturating_sub(first) + 1;
+        let done = update.saturating_sub(first).min(total - 1);
+        self.learning_rate * (total - done) as f32 / total as f32
+    }
+
     /// One `name = value` line per hyper-parameter.
     pub fn table(&self) -> String {
         let v = serde_json::to_value(self).unwrap_or_default();
@@ -187,6 +205,7 @@ mod tests {
             imitation_updates: 200,
             critic_warmup_updates: 0,
             learning_rate: 3e-4,
+            anneal_lr: false,
             ent_coef: 0.01,
             log_every: 10,
             inputs: InputMask::Full,
@@ -225,5 +244,20 @@ mod tests {
         assert!(cmd
             .try_get_matches_from(["--rot-bins", "1", "--envs", "0"])
             .is_err());
+    }
+
+    /// The anneal starts at --lr on the first A2C update, ends at --lr / (A2C updates) on
+    /// the last, and leaves the imitation phase and an un-annealed run alone.
+    #[test]
+    fn the_annealed_learning_rate_falls_linearly_over_the_a2c_updates() {
+        let mut hp = HyperParams::defaults(1);
+        hp.updates = 1200;
+        hp.learning_rate = 1e-3;
+        assert_eq!(hp.a2c_learning_rate(201), 1e-3);
+        assert_eq!(hp.a2c_learning_rate(1200), 1e-3);
+        hp.anneal_lr = true;
+        assert_eq!(hp.a2c_learning_rate(201), 1e-3);
+        assert!((hp.a2c_learning_rate(701) - 0.5e-3).abs() < 1e-9);
+        assert!((hp.a2c_learning_rate(1200) - 1e-6).abs() < 1e-12);
     }
 }

@@ -339,7 +339,7 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
         adam.lr = if imitation {
             hp.imitation_learning_rate
         } else {
-            hp.learning_rate
+            hp.a2c_learning_rate(update)
         };
         // 1. Collect a segment from every environment.
         for t in 0..t_len {
