@@ -409,6 +409,25 @@ fn the_ablation_table_is_results_ablations() {
     assert_eq!(checked, 8, "the ablation table has 8 rows");
 }
 
+/// The three-seed ablation tables are `docs/analysis/ablation_seeds.py`'s output, row for row.
+#[test]
+fn the_ablation_seed_tables_are_results_ablations_seeds() {
+    let readme = read("README.md");
+    let at = readme.find("## Ablations (paper §4.4)").unwrap();
+    let section = &readme[at..];
+    for k in [1, 10] {
+        let md = read(&format!("results/ablations/seeds-k{k}.md"));
+        let rows: Vec<&str> = md
+            .lines()
+            .filter(|l| l.starts_with("| ") && !l.starts_with("| policy |"))
+            .collect();
+        assert_eq!(rows.len(), 4, "full and three ablations at K = {k}");
+        for r in rows {
+            assert!(section.contains(r), "README lacks, at K = {k}: {r}");
+        }
+    }
+}
+
 #[test]
 fn the_agreement_table_is_results_policy_agreement() {
     let readme = read("README.md");
