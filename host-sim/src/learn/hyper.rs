@@ -12,7 +12,7 @@ use clap::{Args, FromArgMatches};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 
-/// Every hyper-parameter of a training run. The first fifteen are `activesense train` flags
+/// Every hyper-parameter of a training run. The first seventeen are `activesense train` flags
 /// (doc comment = help text); the others are fixed.
 #[derive(Args, Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HyperParams {
@@ -51,6 +51,19 @@ pub struct HyperParams {
     #[arg(long, default_value_t = false)]
     #[serde(default)]
     pub anneal_lr: bool,
+    /// Gradient steps per A2C segment. 1 (the default) is A2C; more turns the update into
+    /// PPO's: every step after the first re-weights each sample's policy gradient by
+    /// π_new(a|s) / π_old(a|s) and drops it where that ratio left [1 − --clip-coef,
+    /// 1 + --clip-coef] in the advantage's favour (CleanRL's `update_epochs`, whole segment
+    /// per step). The imitation and critic warm-up phases always take one.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
+    #[serde(default = "one")]
+    pub update_epochs: u64,
+    /// PPO's clip on the probability ratio (used only with --update-epochs > 1: the first
+    /// step's ratio is exactly 1).
+    #[arg(long, default_value_t = 0.2)]
+    #[serde(default = "default_clip_coef")]
+    pub clip_coef: f32,
     /// Entropy bonus coefficient.
     #[arg(long, default_value_t = 0.01)]
     pub ent_coef: f32,
@@ -121,6 +134,14 @@ pub struct HyperParams {
     /// Updates between checkpoints.
     #[arg(skip = 100u64)]
     pub checkpoint_every: u64,
+}
+
+fn one() -> u64 {
+    1
+}
+
+fn default_clip_coef() -> f32 {
+    0.2
 }
 
 fn oracle() -> Termination {
@@ -206,6 +227,8 @@ mod tests {
             critic_warmup_updates: 0,
             learning_rate: 3e-4,
             anneal_lr: false,
+            update_epochs: 1,
+            clip_coef: 0.2,
             ent_coef: 0.01,
             log_every: 10,
             inputs: InputMask::Full,

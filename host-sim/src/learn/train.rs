@@ -407,44 +407,66 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
             hp.gamma,
             hp.gae_lambda,
         );
-        // 3. One gradient step on the whole segment.
-        let (logits, v) = net.forward_batch(&beliefs, &sides, n, &mut cache);
+        // 3. Gradient steps on the whole segment: one (A2C), or --update-epochs (PPO's
+        //    clipped ratio); the log reports the first step's entropy and value loss.
         let mut adv = advantages.clone();
         if hp.norm_adv && !imitation {
             normalise(&mut adv);
         }
-        let mut dlogits = vec![0.0f32; n * 3];
-        let mut dvalues = vec![0.0f32; n];
+        let epochs = if imitation || critic_only {
+            1
+        } else {
+            hp.update_epochs
+        };
+        let mut old_logp = vec![0.0f32; n];
         let (mut entropy_sum, mut vloss_sum) = (0.0f64, 0.0f64);
-        let inv_n = 1.0 / n as f32;
-        for i in 0..n {
-            let p = net::softmax(&logits[i]);
-            let logp = net::log_softmax(&logits[i]);
-            let h: f32 = -(0..3).map(|j| p[j] * logp[j]).sum::<f32>();
-            entropy_sum += h as f64;
-            let a = actions[i];
-            // Policy term: imitation = cross-entropy to the teacher's action (weight 1);
-            // A2C = −A·log π(a|s) (eq. 2). Both have gradient w·(π − onehot(a)).
-            let w = if imitation { 1.0 } else { adv[i] };
-            for j in 0..3 {
-                let onehot = if j == a { 1.0 } else { 0.0 };
-                // Entropy bonus: d(−c·H)/dz_j = c·π_j·(log π_j + H).
-                let dent = hp.ent_coef * p[j] * (logp[j] + h);
-                // The critic's warm-up moves the value head (and the shared trunk) only.
-                dlogits[i * 3 + j] = if critic_only {
-                    0.0
+        let mut grad_norm = 0.0f32;
+        for epoch in 0..epochs {
+            let (logits, v) = net.forward_batch(&beliefs, &sides, n, &mut cache);
+            let mut dlogits = vec![0.0f32; n * 3];
+            let mut dvalues = vec![0.0f32; n];
+            let inv_n = 1.0 / n as f32;
+            for i in 0..n {
+                let p = net::softmax(&logits[i]);
+                let logp = net::log_softmax(&logits[i]);
+                let h: f32 = -(0..3).map(|j| p[j] * logp[j]).sum::<f32>();
+                let a = actions[i];
+                if epoch == 0 {
+                    entropy_sum += h as f64;
+                    old_logp[i] = logp[a];
+                }
+                // Policy term: imitation = cross-entropy to the teacher's action (weight 1);
+                // A2C = −A·log π(a|s) (eq. 2). Both have gradient w·(π − onehot(a)). PPO's
+                // −min(r·A, clip(r)·A), r = π(a|s)/π_old(a|s), has w = r·A where the ratio is
+                // inside the clip or on the advantage's losing side, and 0 where it is clipped
+                // (r = 1 exactly on the first step: that step is A2C's).
+                let w = if imitation {
+                    1.0
                 } else {
-                    (w * (p[j] - onehot) + dent) * inv_n
+                    clipped_ratio_weight(adv[i], logp[a] - old_logp[i], hp.clip_coef)
                 };
+                for j in 0..3 {
+                    let onehot = if j == a { 1.0 } else { 0.0 };
+                    // Entropy bonus: d(−c·H)/dz_j = c·π_j·(log π_j + H).
+                    let dent = hp.ent_coef * p[j] * (logp[j] + h);
+                    // The critic's warm-up moves the value head (and the shared trunk) only.
+                    dlogits[i * 3 + j] = if critic_only {
+                        0.0
+                    } else {
+                        (w * (p[j] - onehot) + dent) * inv_n
+                    };
+                }
+                let dv = v[i] - returns[i];
+                if epoch == 0 {
+                    vloss_sum += 0.5 * (dv as f64) * (dv as f64);
+                }
+                dvalues[i] = hp.vf_coef * dv * inv_n;
             }
-            let dv = v[i] - returns[i];
-            vloss_sum += 0.5 * (dv as f64) * (dv as f64);
-            dvalues[i] = hp.vf_coef * dv * inv_n;
+            grad.iter_mut().for_each(|g| *g = 0.0);
+            net.backward_batch(&mut cache, &dlogits, &dvalues, &mut grad);
+            grad_norm = net::clip_global_norm(&mut grad, hp.max_grad_norm);
+            adam.step(&mut net.params, &grad);
         }
-        grad.iter_mut().for_each(|g| *g = 0.0);
-        net.backward_batch(&mut cache, &dlogits, &dvalues, &mut grad);
-        let grad_norm = net::clip_global_norm(&mut grad, hp.max_grad_norm);
-        adam.step(&mut net.params, &grad);
         done_updates = update;
         bar.inc(1);
         // 4. Log and checkpoint.
@@ -512,6 +534,20 @@ pub fn train(hp: &HyperParams, opts: &RunOptions) -> Result<TrainOutcome> {
         wall_s,
         updates: done_updates,
     })
+}
+
+/// The weight `w` of one sample's policy gradient `w·(π − onehot(a))` under PPO's clipped
+/// surrogate `−min(r·A, clip(r, 1 − c, 1 + c)·A)`, `r = exp(log_ratio)`: `r·A`, or 0 where
+/// the clip holds the surrogate constant (the ratio already moved past the clip in the
+/// advantage's favour). At `log_ratio = 0` it is `A`, A2C's weight, bit for bit.
+pub fn clipped_ratio_weight(advantage: f32, log_ratio: f32, clip: f32) -> f32 {
+    let r = log_ratio.exp();
+    let clipped = (advantage > 0.0 && r > 1.0 + clip) || (advantage < 0.0 && r < 1.0 - clip);
+    if clipped {
+        0.0
+    } else {
+        r * advantage
+    }
 }
 
 /// The policy file's metadata: everything needed to reproduce and judge the run.
@@ -871,6 +907,21 @@ mod tests {
     }
 
     #[test]
+    fn update_epochs_reach_only_the_a2c_phase() {
+        // Imitation alone: the same weights whatever --update-epochs says; with A2C updates
+        // the extra clipped steps move them.
+        let run = |updates, epochs| {
+            let hp = HyperParams {
+                update_epochs: epochs,
+                ..tiny(1, updates, 2)
+            };
+            train(&hp, &RunOptions::default()).unwrap().net.params
+        };
+        assert_eq!(run(2, 1), run(2, 4));
+        assert_ne!(run(4, 1), run(4, 4));
+    }
+
+    #[test]
     fn smoke_training_raises_the_return() {
         // The CI's short training run, with the paper's oracle stop.
         short_run_raises_the_return(activesense_core::episode::Termination::Oracle);
@@ -881,6 +932,24 @@ mod tests {
         // The no-oracle episode: the calibrated stop ends it, right answers earn +1 and
         // wrong ones −W.
         short_run_raises_the_return(activesense_core::episode::Termination::Confident);
+    }
+
+    #[test]
+    fn the_clipped_ratio_weight_is_ppo_s_surrogate_gradient() {
+        // First step: A2C's weight, exactly.
+        assert_eq!(clipped_ratio_weight(0.7, 0.0, 0.2), 0.7);
+        assert_eq!(clipped_ratio_weight(-1.3, 0.0, 0.2), -1.3);
+        // Inside the clip: r·A (r = 1.1).
+        let w = clipped_ratio_weight(2.0, 1.1f32.ln(), 0.2);
+        assert!((w - 2.2).abs() < 1e-6, "{w}");
+        // Past 1 + c with A > 0, and below 1 − c with A < 0: no gradient.
+        assert_eq!(clipped_ratio_weight(2.0, 1.3f32.ln(), 0.2), 0.0);
+        assert_eq!(clipped_ratio_weight(-2.0, 0.7f32.ln(), 0.2), 0.0);
+        // Past the clip on the losing side the gradient stays (min picks the unclipped term).
+        let w = clipped_ratio_weight(-2.0, 1.3f32.ln(), 0.2);
+        assert!((w + 2.6).abs() < 1e-6, "{w}");
+        let w = clipped_ratio_weight(2.0, 0.7f32.ln(), 0.2);
+        assert!((w - 1.4).abs() < 1e-6, "{w}");
     }
 
     #[test]
