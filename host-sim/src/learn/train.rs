@@ -2,7 +2,8 @@
 //! every hyper-parameter is a field of [`HyperParams`] (printed at the start of a run and
 //! stored in the policy file), and [`train`] reads top to bottom: collect a segment of
 //! `num_envs × segment_len` steps from parallel simulated rooms, compute GAE advantages,
-//! take one gradient step, log, checkpoint.
+//! take one gradient step (or, with `--update-epochs N`, N steps under PPO's clipped ratio:
+//! [`clipped_ratio_weight`]), log, checkpoint.
 //!
 //! **Environment.** Each of the `num_envs` environments is a simulated room from the
 //! *training* seeds (`plans::TRAIN_SEEDS`, never the test range) with an
