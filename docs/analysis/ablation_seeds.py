@@ -4,8 +4,13 @@
 Reads the Table-4 evaluations (learnt agent, 1000 test plans, oracle stop) of every ablated policy:
 seed 1 in `results/ablations/k{K}-{what}/`, seeds 2 and 3 in `results/ablations/k{K}-{what}/seeds/{S}/`
 (the `eval-ablation-…` steps of `cargo xtask reproduce`), and the full policy's three seeds from the
-mean ± sd row of `policies/k{K}/seeds.md` (the same plans). Prints one markdown table: mean ± sample
-standard deviation over the seeds of recognition, pose error, measurements, rotations and cost.
+mean ± sd row of a `seeds.md` (the same plans). Prints one markdown table: mean ± sample standard
+deviation over the seeds of recognition, pose error, measurements, rotations and cost.
+
+Every ablation is the A2C command plus one switch, so its "full" row is the A2C command's seeds:
+`policies/k1/seeds.md` at K = 1 (the committed K = 1 policy is A2C), and at K = 10, where the
+committed policy is now trained with PPO's clipped update (`--update-epochs 4`),
+`policies/ablations/k10-full-a2c/seeds.md`: the A2C command's seeds, kept to compare like with like.
 
     python3 docs/analysis/ablation_seeds.py 1 > results/ablations/seeds-k1.md
 """
@@ -20,6 +25,8 @@ WHAT = [
     ("no-scans", "without topological scans"),
     ("no-belief", "without the belief map (scans + history)"),
 ]
+# Where the A2C command's three full-policy seeds live, per K.
+FULL_A2C = {1: "policies/k1", 10: "policies/ablations/k10-full-a2c"}
 COLUMNS = [("recognition_rate", 3), ("pose_error", 4), ("measurements", 2), ("rotations", 2), ("cost", 3)]
 
 
@@ -38,11 +45,12 @@ def main():
           "each seed's `results.json`; mean ± sample standard deviation over the seeds.\n")
     print("| policy | seeds | recognition | pose error (m) | measurements | rotations | cost |")
     print("|---|---|---|---|---|---|---|")
-    seeds_md = Path(__file__).resolve().parents[2] / "policies" / f"k{k}" / "seeds.md"
+    full_dir = FULL_A2C[k]
+    seeds_md = Path(__file__).resolve().parents[2] / full_dir / "seeds.md"
     full = next(l for l in seeds_md.read_text().splitlines() if l.startswith("| mean ± sd"))
     c = [x.strip() for x in full.strip("|").split("|")]
     # seed | val. recognition | val. cost | recognition | cost | measurements | rotations | pose error | …
-    print(f"| full (`policies/k{k}/seeds.md`) | 3 | {c[3]} | {c[7]} | {c[5]} | {c[6]} | {c[4]} |")
+    print(f"| full, A2C (`{full_dir}/seeds.md`) | 3 | {c[3]} | {c[7]} | {c[5]} | {c[6]} | {c[4]} |")
     for d, label in WHAT:
         base = root / f"k{k}-{d}"
         files = [base / "results.json"] + sorted((base / "seeds").glob("*/results.json"))

@@ -171,7 +171,8 @@ fn parse_inputs(s: &str) -> Result<InputMask, String> {
 
 impl HyperParams {
     /// The defaults the committed policies were trained with, K set by the caller: what
-    /// `activesense train --rot-bins K` runs with.
+    /// `activesense train --rot-bins K` runs with (the K = 10 command adds `--lr 1e-4
+    /// --update-epochs 4`).
     pub fn defaults(rot_bins: u8) -> Self {
         let cmd = Self::augment_args(clap::Command::new("hyper-params").no_binary_name(true));
         let m = cmd
