@@ -147,7 +147,15 @@ fn qemu_instruction_counts_reproducible() {
     assert_eq!((k1.rot_bins, k10.rot_bins), (1, 10));
     for r in [k1, k10] {
         assert!(r.vote.count > 0 && r.rotation.count > 0, "{r:?}");
-        assert!(r.finish.count == 2 && r.finish.max > r.vote.max, "{r:?}");
+        // The end of episode registers (a whole refinement): more than a rotation's
+        // bookkeeping. (Not necessarily more than a vote: a K = 10 vote covers ten heading
+        // slots and the coarse-to-fine argmax, and since the ICP takes its heading's sine
+        // and cosine once per iteration heuristic-1's largest K = 10 vote, 9.8 M on these
+        // two episodes, outweighs its largest end of episode, 9.1 M.)
+        assert!(
+            r.finish.count == 2 && r.finish.max > r.rotation.max,
+            "{r:?}"
+        );
         assert!(r.rotation.max < r.vote.mean() as u64, "{r:?}");
     }
     assert!(k10.vote.mean() > 5.0 * k1.vote.mean(), "{k1:?} {k10:?}");

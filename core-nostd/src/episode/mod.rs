@@ -106,7 +106,7 @@ pub struct EpisodeConfig {
     pub min_observability: f32,
     /// The confident stop's stated risk ([`crate::stop`]): [`Termination::Confident`] stops
     /// once the estimated probability that the registration is wrong is below the threshold
-    /// calibrated for it ([`crate::stop::StopModel::threshold`]). Finite, in (0, 1].
+    /// calibrated for it ([`crate::stop::StopModel::threshold_for`]). Finite, in (0, 1].
     #[serde(default = "default_stop_risk")]
     pub stop_risk: f32,
 }

@@ -40,7 +40,7 @@
 //! The staging area ([`GhtLocalizer::stage`]) runs the same vote into the scratch layer and
 //! folds it into an entropy sum without writing the accumulator.
 
-use crate::world::math::{exp, ln};
+use crate::world::math::{cos, exp, ln};
 use crate::{FloorPlan, Pose2};
 use heapless::Vec as HVec;
 use serde::{Deserialize, Serialize};
@@ -353,13 +353,14 @@ impl GhtLocalizer {
     }
 
     /// Algorithms 1–2 for rotation bin `j`, accumulator slot `s`: fills the scratch layer
-    /// with the measurement's max-combined votes and returns their number.
-    fn vote_slot(&mut self, j: usize, s: usize, bearing: f32, range: f32) -> u32 {
+    /// with the measurement's max-combined votes and returns their number. `cos_min` is
+    /// `cos(max_incidence)`, taken once per measurement.
+    fn vote_slot(&mut self, (j, s): (usize, usize), bearing: f32, range: f32, cos_min: f32) -> u32 {
         let l = self.grid.layer_len();
         let subs = self.slot_subs(s);
         vote_layer(
             &self.grid,
-            &self.cfg,
+            (&self.cfg, cos_min),
             &self.rtable,
             &self.interior,
             &self.kernel,
@@ -388,9 +389,10 @@ impl GhtLocalizer {
         }
         let mut stats = VoteStats::default();
         let mut added = 0u32;
+        let cos_min = cos(self.cfg.max_incidence);
         for j in 0..self.grid.rot_bins as usize {
             for s in 0..slots {
-                stats.votes += self.vote_slot(j, s, bearing, range);
+                stats.votes += self.vote_slot((j, s), bearing, range, cos_min);
                 let o = (j * TRACKED_SUB_BINS + s) * l;
                 for (a, &v) in self.acc[o..o + l].iter_mut().zip(&self.scratch[..l]) {
                     *a += v;
@@ -420,8 +422,8 @@ impl GhtLocalizer {
     ///
     /// Incremental: the sums are per reading, so while the coarse argmax (the window) stays
     /// where it was, only the readings added since the last call are voted
-    /// ([`FineSums`]); a moved window re-votes them all. Each windowed vote keeps only the
-    /// 3 × 3 window ([`vote_window`]). Both leave the result bit for bit what the full
+    /// (`FineSums`); a moved window re-votes them all. Each windowed vote keeps only the
+    /// 3 × 3 window (`vote::vote_window`). Both leave the result bit for bit what the full
     /// re-vote gives (`fine_argmax_is_incremental_and_exact` in the tests); on the 20
     /// mcu-bench episodes (heuristic-1, K = 10) the measurement update went from 10.6 M to
     /// the figure in `results/mcu-bench/` (module docs of [`crate::registration::refine`]).
@@ -443,6 +445,7 @@ impl GhtLocalizer {
             sums.reset(c0);
         }
         let all = readings.clone();
+        let cos_min = cos(cfg.max_incidence);
         let mut count = 0usize;
         for (i, (bearing, range)) in readings.enumerate() {
             count = i + 1;
@@ -462,7 +465,7 @@ impl GhtLocalizer {
                 for f in 0..FINE_SUB_BINS {
                     let win = vote_window(
                         &self.grid,
-                        &cfg,
+                        (&cfg, cos_min),
                         &self.rtable,
                         &cand[..nc],
                         &self.interior,
@@ -549,12 +552,13 @@ impl GhtLocalizer {
         let bins = [0i32, -1, 1].map(|d| (c0.bin as i32 + d).rem_euclid(k) as u8);
         // Summed quanta per (bin, fine heading, window cell).
         let mut sums = [[[0u32; 9]; FINE_SUB_BINS as usize]; 3];
+        let cos_min = cos(cfg.max_incidence);
         for (bearing, range) in readings {
             for (b, &bin) in bins.iter().enumerate() {
                 for f in 0..FINE_SUB_BINS {
                     vote_layer(
                         &self.grid,
-                        &cfg,
+                        (&cfg, cos_min),
                         &self.rtable,
                         &self.interior,
                         &self.kernel,
@@ -592,10 +596,11 @@ impl GhtLocalizer {
         // Each measurement adds at most Q to a slot, so amax + Q bounds every staged level.
         let reference = self.amax as u16 + VOTE_QUANTA as u16;
         let mut acc = EntropyAcc::new(self.cfg.evidence_gain);
+        let cos_min = cos(self.cfg.max_incidence);
         for j in 0..self.grid.rot_bins as usize {
             self.staged[..l].fill(0);
             for s in 0..slots {
-                stats.votes += self.vote_slot(j, s, bearing, range);
+                stats.votes += self.vote_slot((j, s), bearing, range, cos_min);
                 let o = (j * TRACKED_SUB_BINS + s) * l;
                 for ((m, &a), &v) in self.staged[..l]
                     .iter_mut()

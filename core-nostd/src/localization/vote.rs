@@ -6,7 +6,7 @@ use super::grid::GridSpec;
 use super::rtable::RTable;
 use super::{LocalizerConfig, MAX_LAYER_CELLS};
 use crate::world::geometry::{unit, Vec2};
-use crate::world::math::{cos, ln, sqrt};
+use crate::world::math::{ln, sqrt};
 
 /// Vote quantum: a measurement adds `round(w·VOTE_QUANTA)` (`w ∈ [0, 1]`) to a slot.
 pub const VOTE_QUANTA: u8 = 16;
@@ -68,11 +68,13 @@ impl EntropyAcc {
 /// window cells centred on `(wx, wy)` (row-major, `0` outside the grid): the same votes and
 /// the same kernel values, without filling or touching the rest of a layer. The
 /// coarse-to-fine argmax runs 96 of these per reading; filling a 900-cell layer for each
-/// cost more than the votes that reach the window.
+/// cost more than the votes that reach the window. `cos_min` is `cos(cfg.max_incidence)`,
+/// taken once per reading by the caller (libm's `cosf` is a software double-precision
+/// routine on the M4F, and this runs 48 times per reading).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn vote_window(
     grid: &GridSpec,
-    cfg: &LocalizerConfig,
+    (cfg, cos_min): (&LocalizerConfig, f32),
     rtable: &RTable,
     candidates: &[u16],
     interior: &[bool; MAX_LAYER_CELLS],
@@ -102,7 +104,6 @@ pub(super) fn vote_window(
     let rd = range * delta;
     let k_par = 0.5 / (sg * sg + cfg.range_sigma * cfg.range_sigma);
     let k_perp = 0.5 / (sg * sg + rd * rd / 12.0);
-    let cos_min = cos(cfg.max_incidence);
     let spread = cfg.spread as i32;
     let h = if grid.rot_bins > 1 {
         bin as f32 * grid.bin_width() - 0.5 * grid.bin_width() + (s as f32 + 0.5) * delta
@@ -201,10 +202,11 @@ pub(super) fn window_candidates(
 
 /// Algorithms 1 and 2 for one rotation bin: fills `scratch` (one layer) with the
 /// max-combined votes of measurement `(bearing, range)`; returns the number of votes.
+/// `cos_min` is `cos(cfg.max_incidence)`, taken once per measurement by the caller.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn vote_layer(
     grid: &GridSpec,
-    cfg: &LocalizerConfig,
+    (cfg, cos_min): (&LocalizerConfig, f32),
     rtable: &RTable,
     interior: &[bool; MAX_LAYER_CELLS],
     kernel: &[u8; KERNEL_LEN],
@@ -231,7 +233,6 @@ pub(super) fn vote_layer(
     let rd = range * delta;
     let k_par = 0.5 / (sg * sg + cfg.range_sigma * cfg.range_sigma);
     let k_perp = 0.5 / (sg * sg + rd * rd / 12.0);
-    let cos_min = cos(cfg.max_incidence);
     let spread = cfg.spread as i32;
     let mut votes = 0u32;
     for s in subs.0..subs.1.min(sub) {

@@ -35,11 +35,11 @@ impl Search {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Budget {
     /// Single leave-outs tried: the worst this many readings the all-readings fit leaves
-    /// unexplained ([`registration::unexplained_readings`]), and then a second one only
+    /// unexplained ([`crate::registration::fits::unexplained_readings`]), and then a second one only
     /// for the worst reading the winning single leave-out leaves unexplained. `u8::MAX`:
     /// every reading, and every second one around the winning single leave-out.
     pub leave_outs: u8,
-    /// ICP iterations per heading-sweep start ([`registration::register_multistart_capped`]):
+    /// ICP iterations per heading-sweep start ([`crate::registration::register_multistart_capped`]):
     /// the sweep only picks the annealing's start.
     pub sweep_iterations: u16,
     /// Sweep starts run on to convergence after the short sweep, the best first.

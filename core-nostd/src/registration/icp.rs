@@ -5,6 +5,7 @@
 
 use super::*;
 use crate::limits::MAX_VERTICES;
+use crate::world::geometry::Turn;
 
 /// Acceleration: smallest cosine between consecutive ICP steps that counts as "the same
 /// direction".
@@ -316,17 +317,26 @@ fn correspond(
     }
 }
 
-/// Correspondences + outlier rejection at `pose`; returns `E` and counts.
+impl IcpParams {
+    /// `cos(max_incidence)`, the correspondences' facing limit: taken once per fit, not
+    /// per iteration (libm's `cosf` is a software double-precision routine on the M4F).
+    pub(super) fn cos_max_incidence(&self) -> f32 {
+        cos(self.max_incidence)
+    }
+}
+
+/// Correspondences + outlier rejection at `pose`; returns `E` and counts. `heading` is a
+/// turn by `pose.theta` or its negative where the caller has one (else any: it is then
+/// recomputed), `cos_max` is [`IcpParams::cos_max_incidence`].
 pub(super) fn match_pairs(
     plan: &FloorPlan,
     obs: &Observations,
-    pose: &Pose2,
-    params: &IcpParams,
+    (pose, heading): (&Pose2, Turn),
+    (params, cos_max): (&IcpParams, f32),
     pairs: &mut Pairs,
 ) -> ErrorSummary {
     pairs.clear();
-    let cos_max = cos(params.max_incidence);
-    let sc = (sin(pose.theta), cos(pose.theta));
+    let sc = heading.to(pose.theta).sin_cos();
     for (i, o) in obs.pts.iter().enumerate() {
         if params.excludes(i) {
             continue;
@@ -392,9 +402,10 @@ pub(super) fn match_pairs(
     }
 }
 
-/// Equation 6 on the inlier pairs: the model→scene `T`. With `fixed` the rotation is
-/// `fixed.theta` and only the translation is solved.
-fn solve(pairs: &Pairs, fixed: Option<f32>) -> Option<Pose2> {
+/// Equation 6 on the inlier pairs: the model→scene `T`, with the turn by its heading as
+/// solved (before `Pose2::new` wraps it). With `fixed` the rotation is `fixed`'s and only
+/// the translation is solved.
+fn solve(pairs: &Pairs, fixed: Option<Turn>) -> Option<(Pose2, Turn)> {
     let (mut sw, mut mbar, mut obar) = (0.0f32, v2(0.0, 0.0), v2(0.0, 0.0));
     for p in pairs.iter().filter(|p| p.inlier) {
         sw += p.weight;
@@ -406,9 +417,9 @@ fn solve(pairs: &Pairs, fixed: Option<f32>) -> Option<Pose2> {
     }
     mbar /= sw;
     obar /= sw;
-    let theta = match fixed {
+    let turn = match fixed {
         Some(t) => t,
-        None => {
+        None => Turn::new({
             // Γ = (M − m̄)ᵀ W (O − ō); only Γ01 − Γ10 and tr Γ are needed.
             let (mut cross_sum, mut dot_sum, mut spread) = (0.0f32, 0.0f32, 0.0f32);
             for p in pairs.iter().filter(|p| p.inlier) {
@@ -421,10 +432,10 @@ fn solve(pairs: &Pairs, fixed: Option<f32>) -> Option<Pose2> {
                 return None;
             }
             atan2(cross_sum, dot_sum)
-        }
+        }),
     };
-    let t = obar - rotate(mbar, theta);
-    Some(Pose2::new(t.x, t.y, theta))
+    let t = obar - turn.apply(mbar);
+    Some((Pose2::new(t.x, t.y, turn.angle()), turn))
 }
 
 pub(super) fn check_inputs(
@@ -451,7 +462,13 @@ pub fn registration_error(
 ) -> Result<ErrorSummary, RegistrationError> {
     check_inputs(obs, pose, params)?;
     let mut pairs = Pairs::new();
-    Ok(match_pairs(plan, obs, pose, params, &mut pairs))
+    Ok(match_pairs(
+        plan,
+        obs,
+        (pose, Turn::new(pose.theta)),
+        (params, params.cos_max_incidence()),
+        &mut pairs,
+    ))
 }
 
 /// Sparse ICP (Algorithm 4) from the AgentPose `initial` against the centred `plan`.
@@ -481,12 +498,14 @@ pub(super) fn icp_inner(
     pairs: &mut Pairs,
 ) -> Registration {
     let fixed = if params.fixed_heading {
-        Some(wrap_angle(-initial.theta))
+        Some(Turn::new(wrap_angle(-initial.theta)))
     } else {
         None
     };
+    let cos_max = params.cos_max_incidence();
     let mut pose = *initial;
-    let mut summary = match_pairs(plan, obs, &pose, params, pairs);
+    let mut heading = Turn::new(pose.theta);
+    let mut summary = match_pairs(plan, obs, (&pose, heading), (params, cos_max), pairs);
     let mut best = (pose, summary);
     let mut iterations = 0u16;
     let mut converged = false;
@@ -498,10 +517,10 @@ pub(super) fn icp_inner(
     let mut prev_step: Option<[f32; 3]> = None;
     while iterations < params.max_iterations {
         iterations += 1;
-        let Some(t) = solve(pairs, fixed) else {
+        let Some((t, turn)) = solve(pairs, fixed) else {
             break;
         };
-        let next = t.inverse();
+        let (next, next_heading) = t.inverse_with(turn);
         if !next.is_finite() {
             break;
         }
@@ -513,7 +532,8 @@ pub(super) fn icp_inner(
         let dt = length(v2(step[0], step[1]));
         let dth = abs(step[2]);
         pose = next;
-        summary = match_pairs(plan, obs, &pose, params, pairs);
+        heading = next_heading;
+        summary = match_pairs(plan, obs, (&pose, heading), (params, cos_max), pairs);
         if summary.score <= best.1.score && in_trust_region(&pose, centre, params) {
             best = (pose, summary);
         }
@@ -539,7 +559,7 @@ pub(super) fn icp_inner(
                         pose.y + k * step[1],
                         pose.theta + k * step[2],
                     );
-                    let s = match_pairs(plan, obs, &jump, params, pairs);
+                    let s = match_pairs(plan, obs, (&jump, heading), (params, cos_max), pairs);
                     if s.score < summary.score {
                         pose = jump;
                         summary = s;
@@ -550,7 +570,7 @@ pub(super) fn icp_inner(
                         continue;
                     }
                     // Restore the pairs of the unaccelerated pose.
-                    let _ = match_pairs(plan, obs, &pose, params, pairs);
+                    let _ = match_pairs(plan, obs, (&pose, heading), (params, cos_max), pairs);
                 }
             }
         }
@@ -641,7 +661,14 @@ pub fn register_centred(
     let mut rng = GaussianRng::new(params.seed);
     let mut pairs = Pairs::new();
     let mut pose = *initial;
-    let mut summary = match_pairs(plan, obs, &pose, icp, &mut pairs);
+    let cos_max = icp.cos_max_incidence();
+    let mut summary = match_pairs(
+        plan,
+        obs,
+        (&pose, Turn::new(pose.theta)),
+        (icp, cos_max),
+        &mut pairs,
+    );
     let mut iterations = 0u16;
     let sigmas = |e: f32| {
         let r = if e.is_finite() { sqrt(e) } else { 1.0 };
@@ -674,7 +701,13 @@ pub fn register_centred(
             if !in_trust_region(&cand, centre, icp) {
                 continue;
             }
-            let s = match_pairs(plan, obs, &cand, icp, &mut pairs);
+            let s = match_pairs(
+                plan,
+                obs,
+                (&cand, Turn::new(cand.theta)),
+                (icp, cos_max),
+                &mut pairs,
+            );
             if s.score < pick.1.score {
                 pick = (cand, s);
             }
@@ -878,20 +911,20 @@ mod tests {
                 })
                 .unwrap();
         }
-        let got = solve(&pairs, None).unwrap();
+        let (got, _) = solve(&pairs, None).unwrap();
         assert!(
             pos_err(&got, &t) < 1e-5 && ang_err(&got, &t) < 1e-6,
             "{got:?}"
         );
         // Fixed heading: translation only.
-        let got = solve(&pairs, Some(0.9)).unwrap();
+        let (got, _) = solve(&pairs, Some(Turn::new(0.9))).unwrap();
         assert!(pos_err(&got, &t) < 1e-5 && got.theta == Pose2::new(0.0, 0.0, 0.9).theta);
         // A rotation beyond ±π/2 (arctan would fold it; atan2 must not).
         let t = Pose2::new(0.1, 0.2, 2.8);
         for p in pairs.iter_mut() {
             p.s = t.transform(p.m);
         }
-        let got = solve(&pairs, None).unwrap();
+        let (got, _) = solve(&pairs, None).unwrap();
         assert!(ang_err(&got, &t) < 1e-5, "{got:?}");
     }
 

@@ -6,6 +6,7 @@
 
 use super::icp::{check_inputs, icp_inner, match_pairs, Pairs};
 use super::*;
+use crate::world::geometry::Turn;
 
 /// Annealed registration after a heading sweep: sparse ICP from `starts` headings spread
 /// evenly over `initial.theta ± heading_span`, then Algorithm 3 from the one with the lowest
@@ -63,6 +64,7 @@ pub fn register_multistart_capped(
         ..params.icp
     };
     let mut swept: heapless::Vec<(Pose2, f32, u8), MAX_SWEEP_STARTS> = heapless::Vec::new();
+    let cos_max = params.icp.cos_max_incidence();
     let run = |start: &Pose2, icp: &IcpParams, pairs: &mut Pairs| {
         let r = icp_inner(plan, obs, start, initial, icp, pairs);
         let pose = if in_trust_region(&r.pose, initial, &params.icp) {
@@ -72,7 +74,14 @@ pub fn register_multistart_capped(
         };
         (
             pose,
-            match_pairs(plan, obs, &pose, &params.icp, pairs).score,
+            match_pairs(
+                plan,
+                obs,
+                (&pose, Turn::new(pose.theta)),
+                (&params.icp, cos_max),
+                pairs,
+            )
+            .score,
         )
     };
     for k in 0..starts.min(MAX_SWEEP_STARTS as u8) {

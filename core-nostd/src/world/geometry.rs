@@ -40,8 +40,69 @@ pub fn unit(a: f32) -> Vec2 {
 /// Rotates `p` by `a` radians counter-clockwise.
 #[inline]
 pub fn rotate(p: Vec2, a: f32) -> Vec2 {
-    let (s, c) = (sin(a), cos(a));
-    v2(c * p.x - s * p.y, s * p.x + c * p.y)
+    Turn::new(a).apply(p)
+}
+
+/// An angle with its sine and cosine, for chains of rotations by one angle and its
+/// negative. Sparse ICP rotates by the same heading three times per iteration (the solve,
+/// the inverse, the correspondences); on the M4F libm's `sinf` and `cosf` are
+/// software double-precision routines of about 800 instructions each, so a [`Turn`] takes
+/// them once. Reusing them is exact: libm's `sinf` is odd and `cosf` even on every
+/// non-NaN f32 (checked exhaustively by `sinf_is_odd_and_cosf_even_on_every_f32`, an
+/// ignored test of this module; README, "Instructions per update").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Turn {
+    angle: f32,
+    sin: f32,
+    cos: f32,
+}
+
+impl Turn {
+    /// The turn by `angle` (rad).
+    #[inline]
+    pub fn new(angle: f32) -> Turn {
+        Turn {
+            angle,
+            sin: sin(angle),
+            cos: cos(angle),
+        }
+    }
+
+    /// The turn by `angle`, from this turn's sine and cosine when `angle` is this turn's
+    /// angle or its negative (bit for bit), else computed afresh.
+    #[inline]
+    pub fn to(self, angle: f32) -> Turn {
+        if angle.to_bits() == self.angle.to_bits() {
+            self
+        } else if angle.to_bits() == (-self.angle).to_bits() && !angle.is_nan() {
+            Turn {
+                angle,
+                sin: -self.sin,
+                cos: self.cos,
+            }
+        } else {
+            Turn::new(angle)
+        }
+    }
+
+    /// The angle (rad).
+    #[inline]
+    pub fn angle(&self) -> f32 {
+        self.angle
+    }
+
+    /// `(sin, cos)` of the angle.
+    #[inline]
+    pub fn sin_cos(&self) -> (f32, f32) {
+        (self.sin, self.cos)
+    }
+
+    /// `p` rotated by the angle.
+    #[inline]
+    pub fn apply(&self, p: Vec2) -> Vec2 {
+        let (s, c) = (self.sin, self.cos);
+        v2(c * p.x - s * p.y, s * p.x + c * p.y)
+    }
 }
 
 /// A rigid transform in SE(2): rotation `theta` (radians) then translation `(x, y)`.
@@ -99,6 +160,16 @@ impl Pose2 {
         Pose2::new(t.x, t.y, -self.theta)
     }
 
+    /// [`Pose2::inverse`] from `turn`, a turn by this pose's heading or its negative (any
+    /// other is recomputed), and the turn by the inverse's heading: the same bits, without
+    /// libm's sine and cosine where they are known.
+    pub fn inverse_with(&self, turn: Turn) -> (Pose2, Turn) {
+        let back = turn.to(-self.theta);
+        let t = back.apply(-self.translation());
+        let inverse = Pose2::new(t.x, t.y, -self.theta);
+        (inverse, back.to(inverse.theta))
+    }
+
     /// True when every component is finite.
     pub fn is_finite(&self) -> bool {
         self.x.is_finite() && self.y.is_finite() && self.theta.is_finite()
@@ -108,6 +179,56 @@ impl Pose2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What [`Turn::to`] relies on: libm's `sinf` is odd and `cosf` even, bit for bit, on
+    /// every non-NaN f32 (2^31 magnitudes, both signs). About 4 min on two cores in
+    /// release: `cargo test --release -p activesense-core -- --ignored every_f32`.
+    #[test]
+    #[ignore]
+    fn sinf_is_odd_and_cosf_even_on_every_f32() {
+        extern crate std;
+        let halves: [std::thread::JoinHandle<u64>; 2] = [0u32, 1].map(|t| {
+            std::thread::spawn(move || {
+                let mut checked = 0u64;
+                for b in t * 0x4000_0000..(t + 1) * 0x4000_0000 {
+                    let x = f32::from_bits(b);
+                    if x.is_nan() {
+                        continue;
+                    }
+                    let (s, sn) = (sin(x), sin(-x));
+                    let (c, cn) = (cos(x), cos(-x));
+                    assert!(
+                        (sn.to_bits() == (-s).to_bits() || (s.is_nan() && sn.is_nan()))
+                            && (cn.to_bits() == c.to_bits() || (c.is_nan() && cn.is_nan())),
+                        "{b:#x}"
+                    );
+                    checked += 1;
+                }
+                checked
+            })
+        });
+        let checked: u64 = halves.into_iter().map(|h| h.join().unwrap()).sum();
+        assert_eq!(checked, 0x7F80_0001);
+    }
+
+    #[test]
+    fn a_turn_reuses_its_sine_and_cosine_for_the_same_and_the_negated_angle() {
+        for a in [0.0f32, -0.0, 0.3, -2.9, core::f32::consts::PI, 1e-20, 40.0] {
+            let t = Turn::new(a);
+            assert_eq!(t.to(a), t);
+            assert_eq!(t.to(-a), Turn::new(-a));
+            assert_eq!(t.to(a + 0.5), Turn::new(a + 0.5));
+            let p = v2(1.25, -0.5);
+            assert_eq!(t.apply(p), rotate(p, a));
+        }
+        // The inverse from a turn equals the plain one, whatever turn is passed.
+        let p = Pose2::new(1.5, -2.0, 0.7);
+        for hint in [Turn::new(0.7), Turn::new(-0.7), Turn::new(0.1)] {
+            let (inv, turn) = p.inverse_with(hint);
+            assert_eq!(inv, p.inverse());
+            assert_eq!(turn, Turn::new(inv.theta));
+        }
+    }
 
     #[test]
     fn compose_inverse_is_identity() {

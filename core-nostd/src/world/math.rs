@@ -9,10 +9,57 @@ use core::f32::consts::PI;
 /// 2π as f32.
 pub const TAU: f32 = 2.0 * PI;
 
-/// Square root (correctly rounded in both libm and hardware).
+/// Square root (correctly rounded in both libm and hardware). The M4F's FPU computes it
+/// in one instruction (`fpu::sqrt`); elsewhere libm's routine gives the same bits.
 #[inline]
 pub fn sqrt(x: f32) -> f32 {
-    libm::sqrtf(x)
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        fpu::sqrt(x)
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
+/// `VSQRT.F32` on the Cortex-M4F's single-precision FPU. IEEE 754 requires a correctly
+/// rounded square root, and libm's `sqrtf` (the host's) is one too, so the bits are the
+/// same for every non-NaN input; the firmware's `dsp-selftest` compares the two on the
+/// device. libm's routine is a bit-by-bit software loop of about 36 instructions plus the
+/// call, and the ICP's correspondences take one per pair: 3 % of a K = 10 episode's
+/// instructions under the calibrated stop (README, "Instructions per update"). Stable Rust has no `sqrt` in `core`, and its `asm!` offers the S registers
+/// only with the double-precision `vfp2` feature, which this single-precision FPU lacks;
+/// so the instruction is a two-instruction leaf function in `global_asm!` (hard-float
+/// AAPCS: argument and result in `s0`), and the call is the core's second `unsafe` block
+/// (`docs/ARCHITECTURE.md`, "unsafe").
+#[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+#[allow(unsafe_code)]
+pub mod fpu {
+    core::arch::global_asm!(
+        ".section .text.activesense_vsqrtf,\"ax\",%progbits",
+        ".fpu fpv4-sp-d16",
+        ".global activesense_vsqrtf",
+        ".type activesense_vsqrtf,%function",
+        ".thumb_func",
+        "activesense_vsqrtf:",
+        "vsqrt.f32 s0, s0",
+        "bx lr",
+        ".size activesense_vsqrtf, . - activesense_vsqrtf",
+    );
+
+    extern "C" {
+        fn activesense_vsqrtf(x: f32) -> f32;
+    }
+
+    /// `VSQRT.F32` of `x`.
+    #[inline]
+    pub fn sqrt(x: f32) -> f32 {
+        // SAFETY: a leaf of two instructions on `s0` and `lr` only (no memory, no stack),
+        // called with the hard-float ABI the target uses; the runtime enables the FPU
+        // before `main`.
+        unsafe { activesense_vsqrtf(x) }
+    }
 }
 /// Sine.
 #[inline]

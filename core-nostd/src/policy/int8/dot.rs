@@ -1,11 +1,11 @@
 //! The two inner products the int8 network spends its time in, behind one trait so the
-//! layer code ([`super::fast`]) is written once: [`Portable`] (plain Rust, every target, the
+//! layer code (`super::fast`) is written once: [`Portable`] (plain Rust, every target, the
 //! reference) and, on the Cortex-M4, `Dsp` (`super::dsp`, SMLAD / SXTB16 / SXTAB16 in
 //! `asm!`). Both compute the same integers exactly: a sum of products of small integers in
 //! an `i32` that cannot overflow for any valid blob (`docs/policy-blob.md`), so the order of
 //! the additions does not matter and host and device agree bit for bit.
 //!
-//! Data shapes (see [`super::fast`] for where they come from):
+//! Data shapes (see `super::fast` for where they come from):
 //! - [`Dot::conv4`]: one 3 × 3 window: three runs of `seg` int8 activations (`seg` a
 //!   multiple of 4) at `x[0..]`, `x[row..]`, `x[2·row..]`; `w` holds 4 output channels'
 //!   weights *pre-widened* to int16 pairs in SMLAD order, the three runs one after the

@@ -14,12 +14,13 @@
 //! The inner loop is 17 instructions per 16 multiply-accumulates (conv) and 15 per 8 (fully
 //! connected).
 //!
-//! **The one `unsafe` of the core.** Stable Rust has no DSP intrinsics (`__smlad` is
-//! unstable) and LLVM's parallel-DSP pass does not fuse int8 loops (it pairs 16-bit loads
-//! only: a stand-alone `i16` dot product did get SMLAD, but the int8 reference kernel
-//! compiled to one `SMLABB` or `MLA` per product, no SMLAD in the whole firmware), so
-//! these loops are `core::arch::asm!`, which is `unsafe`. The crate is
-//! `#![deny(unsafe_code)]` with one `#[allow(unsafe_code)]`, on this module; the safe
+//! **The core's first `unsafe`** (the other is `world::math::fpu`, the FPU's square
+//! root). Stable Rust has no DSP intrinsics (`__smlad` is unstable) and LLVM's
+//! parallel-DSP pass does not fuse int8 loops (it pairs 16-bit loads only: a stand-alone
+//! `i16` dot product did get SMLAD, but the int8 reference kernel compiled to one `SMLABB`
+//! or `MLA` per product, no SMLAD in the whole firmware), so these loops are
+//! `core::arch::asm!`, which is `unsafe`. The crate is `#![deny(unsafe_code)]` with an
+//! `#[allow(unsafe_code)]` on this module and on `world::math::fpu`; the safe
 //! wrappers below check every length before an `asm!` block reads memory (a mismatch falls
 //! back to the portable kernel, never reads out of bounds), and the blocks only read
 //! (`readonly`, no stack, no writes). `docs/ARCHITECTURE.md` ("unsafe") records this.

@@ -36,6 +36,9 @@ pub enum Mismatch {
     BadBlob(u8),
     /// [`Dot::max_u8x4`] on random words.
     Max4(u32),
+    /// [`crate::world::math::sqrt`] (the FPU's `VSQRT.F32` on the M4F) against libm's
+    /// `sqrtf` (the host's): the input's bits.
+    Sqrt(u32),
 }
 
 /// What ran, and the network's cost on the last blob (in `clock` ticks, 0 without a clock).
@@ -154,6 +157,43 @@ fn primitives(rng: &mut Rng, report: &mut Report) -> Result<(), Mismatch> {
             }
         }
         report.cases += 3;
+    }
+    sqrt_bits(rng, report)
+}
+
+/// The target's square root against libm's, bit for bit: random bit patterns over every
+/// exponent (subnormals included), exact squares, and the edges. Not a kernel, but it sits
+/// on the same path (the registration's correspondences) and differs by target the same way.
+fn sqrt_bits(rng: &mut Rng, report: &mut Report) -> Result<(), Mismatch> {
+    let edges = [
+        0.0f32,
+        -0.0,
+        f32::MIN_POSITIVE,
+        f32::from_bits(1),
+        f32::MAX,
+        f32::INFINITY,
+        1.0,
+        2.0,
+        0.25,
+        -1.0,
+        f32::NEG_INFINITY,
+    ];
+    let random = (0..2048u32).map(|k| {
+        let r = rng.next();
+        if k % 4 == 0 {
+            // An exact square: the root is exact, a rounding slip would show.
+            let m = (r >> 20) as f32 + 1.0;
+            m * m
+        } else {
+            f32::from_bits(r & 0x7FFF_FFFF)
+        }
+    });
+    for x in edges.into_iter().chain(random) {
+        let (a, b) = (crate::world::math::sqrt(x), libm::sqrtf(x));
+        if a.to_bits() != b.to_bits() && !(a.is_nan() && b.is_nan()) {
+            return Err(Mismatch::Sqrt(x.to_bits()));
+        }
+        report.cases += 1;
     }
     Ok(())
 }
