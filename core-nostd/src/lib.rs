@@ -35,6 +35,7 @@
 //! | [`limits`] | capacities and defaults (§4.1 scan width, §4.2 action limits, Table 3 rotation step) |
 //! | [`checksum`] | CRC-32 of policy blobs and protocol frames (`docs/protocol.md`, `docs/policy-blob.md`) |
 //! | [`world::math`] | determinism: `libm` maths, SplitMix64 seed derivation |
+//! | [`world::trig`] | libm's `sinf` / `cosf`, bit for bit, in fixed point (the M4F has no double precision) |
 //! | [`world::geometry`] | 3 (SE(2) conventions) |
 //! | [`world::floorplan`] | 3, 4.1 (the polygonal floor-plan model, ray casting, topological scan) |
 //! | [`world::symmetry`] | 3.4 (edge-chain rotational-symmetry detection, Wolter et al. 1985) |

@@ -54,6 +54,7 @@ compile_error!("choose a defmt transport: feature `log-semihosting` or `log-rtt`
 
 #[cfg(feature = "log-semihosting")]
 mod log;
+mod stack;
 mod usart;
 
 #[cfg(feature = "log-rtt")]
@@ -130,6 +131,7 @@ const CONFIG: SessionConfig = SessionConfig {
     max_reply_ms: MAX_REPLY_MS,
     cycle_clock: Some(cycles),
     policies: &activesense_core::policy::builtin::POLICIES,
+    stack_usage: Some(stack::usage),
 };
 
 /// The whole protocol state (frame buffers, plan, measurement log) lives here, not on
@@ -167,6 +169,7 @@ fn cmdline_has(word: &[u8]) -> bool {
 
 #[entry]
 fn main() -> ! {
+    stack::paint();
     let cp = cortex_m::Peripherals::take().unwrap();
     let range_mm = match self_test() {
         Ok(r) => r,

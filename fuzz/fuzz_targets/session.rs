@@ -30,6 +30,7 @@ fuzz_target!(|data: &[u8]| {
         cycle_clock: None,
         // The firmware's policies: learnt-int8 episodes and uploads are fuzzed too.
         policies: &activesense_core::policy::builtin::POLICIES,
+        stack_usage: None,
     }));
     let mut out = Sink(Vec::new());
     let chunk = 1 + (ctl as usize & 31);

@@ -42,7 +42,7 @@ enum Command {
     Serial(activesense_sim::link::remote::SerialArgs),
     /// Count the firmware's instructions per update and per registration under QEMU
     /// (-icount shift=0); prints a markdown table (see `cargo xtask mcu-bench`).
-    McuBench(activesense_sim::link::remote::McuBenchArgs),
+    McuBench(activesense_sim::link::mcu_bench::McuBenchArgs),
     /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
     Dataset(cli::dataset::DatasetArgs),
     /// Evaluate agents on the test plans (the paper's Table 4): writes results.json,
@@ -124,7 +124,7 @@ fn main() -> ExitCode {
         Command::GeocomSim(a) => cli::station::run_sim(a),
         Command::Sim(a) => activesense_sim::link::remote::cmd_sim(a),
         Command::Serial(a) => activesense_sim::link::remote::cmd_serial(a),
-        Command::McuBench(a) => activesense_sim::link::remote::cmd_mcu_bench(a),
+        Command::McuBench(a) => activesense_sim::link::mcu_bench::cmd_mcu_bench(a),
         Command::Policy(PolicyCommand::Quantize(a)) => cli::policy::quantize(a),
         Command::Policy(PolicyCommand::Agreement(a)) => cli::policy::agreement(a),
         Command::Policy(PolicyCommand::Upload(a)) => cli::policy::upload(a),

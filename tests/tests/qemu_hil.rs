@@ -8,6 +8,10 @@ use activesense_tests::{
 };
 use std::time::Duration;
 
+/// Stack the HIL episodes must leave untouched: the deepest path of a longer or rarer
+/// episode than these, and an exception frame on top.
+const STACK_MARGIN: u32 = 1024;
+
 #[test]
 fn qemu_firmware_episodes_bit_identical_and_faults() {
     let elf = firmware_elf();
@@ -25,6 +29,17 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
     // A policy uploaded into the firmware's RAM slot serves bit-identically; bad uploads
     // are refused with the uploaded policy still serving.
     activesense_tests::policy_upload_suite(&mut l.client);
+    // The firmware's painted stack: how deep these episodes, faults and uploads went.
+    let stack = l.client.status().expect("status").stack;
+    eprintln!("device stack: {stack:?}");
+    assert!(
+        stack.size > 30_000 && stack.high_water > 10_000,
+        "{stack:?}"
+    );
+    assert!(
+        stack.high_water + STACK_MARGIN <= stack.size,
+        "less than {STACK_MARGIN} bytes of stack left: {stack:?}"
+    );
     let out = l
         .shutdown()
         .expect("firmware shuts down with exit status 0");
@@ -125,7 +140,7 @@ fn qemu_policy_upload_then_info_in_a_second_process() {
 /// work is ordered as it must be (rotation < K = 1 vote < K = 10 vote).
 #[test]
 fn qemu_instruction_counts_reproducible() {
-    use activesense_sim::link::remote::{mcu_bench, McuBenchArgs};
+    use activesense_sim::link::mcu_bench::{mcu_bench, McuBenchArgs};
     use activesense_sim::world::plans::TEST_SEEDS;
     let args = McuBenchArgs {
         elf: firmware_elf(),

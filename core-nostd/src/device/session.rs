@@ -31,6 +31,9 @@ pub struct SessionConfig {
     /// int8 policy blobs built into the firmware (`docs/policy-blob.md`), one per K; each
     /// is validated (CRC included) when an episode asks for it.
     pub policies: &'static [&'static [u8]],
+    /// The stack's high-water mark, reported in `Status` (the firmware's painted stack;
+    /// `None` on the host).
+    pub stack_usage: Option<fn() -> StackUsage>,
 }
 
 /// What the caller should do after [`Session::feed`].
@@ -415,6 +418,7 @@ impl Session {
                 episode_actions: self.ctl.episode_actions(),
                 link: self.stats,
                 cycles: self.ctl.cycles(),
+                stack: self.config.stack_usage.map(|f| f()).unwrap_or_default(),
             }),
             Request::Abort => match self.ctl.abort() {
                 Some(rep) => Response::Aborted(rep),
@@ -527,6 +531,7 @@ mod tests {
         max_reply_ms: 1000,
         cycle_clock: None,
         policies: &[],
+        stack_usage: None,
     };
 
     fn frames(bytes: &[u8]) -> Vec<(u16, Response)> {
@@ -1009,6 +1014,10 @@ mod tests {
                 episodes: u32::MAX,
             },
             cycles: max_stats,
+            stack: StackUsage {
+                high_water: u32::MAX,
+                size: u32::MAX,
+            },
         };
         for r in [
             Response::Done(rep),

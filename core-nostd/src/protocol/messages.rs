@@ -398,6 +398,19 @@ pub struct DeviceStatus {
     pub link: LinkStats,
     /// Cycle statistics over all updates since power-on / `Reset`.
     pub cycles: UpdateStats,
+    /// The main stack's high-water mark (zero where the device does not measure it).
+    /// Since protocol v8.
+    pub stack: StackUsage,
+}
+
+/// How deep the device's stack has been since power-on (not cleared by `Reset`): the
+/// firmware paints its free stack at boot and finds the lowest word overwritten.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StackUsage {
+    /// Deepest stack seen (bytes below the top of RAM); 0: not measured.
+    pub high_water: u32,
+    /// The stack's room: from the top of RAM down to the statics (bytes); 0: not measured.
+    pub size: u32,
 }
 
 /// Errors the device reports in [`Response::Error`].

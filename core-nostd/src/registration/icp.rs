@@ -325,6 +325,32 @@ impl IcpParams {
     }
 }
 
+/// Pair counts up to this sort their distances in a 128-byte buffer, not a 2 KB one.
+const SHORT_SORT: usize = 32;
+
+/// The `keep`-th smallest pair distance and the (lower) median, `0` for none, from a
+/// buffer of `N` that fits the pairs: zeroing one of `MAX_OBSERVATIONS` (2 KB) per
+/// correspondence pass was 2 % of a K = 10 episode's instructions on the device, and the
+/// calibrated stop's fits rarely have more than [`SHORT_SORT`] readings. Its own frame
+/// (`inline(never)`), so the correspondences' frame does not hold the buffer.
+#[inline(never)]
+fn order_statistics<const N: usize>(pairs: &Pairs, keep: usize) -> (f32, f32) {
+    let n = pairs.len().min(N);
+    let mut sorted = [0.0f32; N];
+    for (k, p) in pairs.iter().take(n).enumerate() {
+        sorted[k] = p.dist;
+    }
+    let sorted = &mut sorted[..n];
+    sorted.sort_unstable_by(|a, b| a.total_cmp(b));
+    let threshold = if keep == 0 {
+        0.0
+    } else {
+        sorted[keep.min(n) - 1]
+    };
+    let median = if n == 0 { 0.0 } else { sorted[(n - 1) / 2] };
+    (threshold, median)
+}
+
 /// Correspondences + outlier rejection at `pose`; returns `E` and counts. `heading` is a
 /// turn by `pose.theta` or its negative where the caller has one (else any: it is then
 /// recomputed), `cos_max` is [`IcpParams::cos_max_incidence`].
@@ -353,18 +379,15 @@ pub(super) fn match_pairs(
     }
     let n = pairs.len();
     // Percentile threshold on the distances.
-    let mut sorted = [0.0f32; MAX_OBSERVATIONS];
-    for (k, p) in pairs.iter().enumerate() {
-        sorted[k] = p.dist;
-    }
-    let sorted = &mut sorted[..n];
-    sorted.sort_unstable_by(|a, b| a.total_cmp(b));
     let keep = {
         let k = (params.keep_fraction * n as f32 + 0.999) as usize;
         k.max(params.min_pairs.max(2) as usize).min(n)
     };
-    let threshold = if keep == 0 { 0.0 } else { sorted[keep - 1] };
-    let median = if n == 0 { 0.0 } else { sorted[(n - 1) / 2] };
+    let (threshold, median) = if n <= SHORT_SORT {
+        order_statistics::<SHORT_SORT>(pairs, keep)
+    } else {
+        order_statistics::<MAX_OBSERVATIONS>(pairs, keep)
+    };
     let floor = params
         .reject_min_distance
         .max(params.reject_median_factor * median);
@@ -454,6 +477,7 @@ pub(super) fn check_inputs(
 }
 
 /// The registration error `E` at AgentPose `pose` (correspondences, rejection, weighted RMS).
+#[inline(never)]
 pub fn registration_error(
     plan: &FloorPlan,
     obs: &Observations,
@@ -472,6 +496,7 @@ pub fn registration_error(
 }
 
 /// Sparse ICP (Algorithm 4) from the AgentPose `initial` against the centred `plan`.
+#[inline(never)]
 pub fn sparse_icp(
     plan: &FloorPlan,
     obs: &Observations,
@@ -637,12 +662,32 @@ pub fn register(
 
 /// [`register`] from `initial`, with the trust region centred on `centre` (the refinement
 /// starts its final annealing from the screened winner, inside the belief's trust region).
+#[inline(never)]
 pub fn register_centred(
     plan: &FloorPlan,
     obs: &Observations,
     initial: &Pose2,
     centre: &Pose2,
     params: &AnnealParams,
+) -> Result<Registration, RegistrationError> {
+    register_centred_with(plan, obs, initial, centre, params, &mut Pairs::new())
+}
+// The functions that hold a pair buffer (14 KB) are never inlined: inlined, the buffer
+// stays in the caller's frame for the caller's whole run, and the refinement's callers
+// nest (track → refine → hypothesis → sweep): on the device's 42 KB stack three such
+// frames left a few hundred bytes (README, "What is not done yet").
+
+/// [`register_centred`] with the caller's pair buffer: `MAX_OBSERVATIONS` pairs are 14 KB,
+/// and the heading sweep that ends in this annealing already holds one; two on the
+/// device's 42 KB stack left it a few hundred bytes (README, "What is not done yet").
+/// The buffer is scratch: every correspondence pass clears it first.
+pub(super) fn register_centred_with(
+    plan: &FloorPlan,
+    obs: &Observations,
+    initial: &Pose2,
+    centre: &Pose2,
+    params: &AnnealParams,
+    pairs: &mut Pairs,
 ) -> Result<Registration, RegistrationError> {
     let icp = &params.icp;
     check_inputs(obs, initial, icp)?;
@@ -659,7 +704,6 @@ pub fn register_centred(
         return Err(RegistrationError::InvalidParams);
     }
     let mut rng = GaussianRng::new(params.seed);
-    let mut pairs = Pairs::new();
     let mut pose = *initial;
     let cos_max = icp.cos_max_incidence();
     let mut summary = match_pairs(
@@ -667,7 +711,7 @@ pub fn register_centred(
         obs,
         (&pose, Turn::new(pose.theta)),
         (icp, cos_max),
-        &mut pairs,
+        pairs,
     );
     let mut iterations = 0u16;
     let sigmas = |e: f32| {
@@ -706,13 +750,13 @@ pub fn register_centred(
                 obs,
                 (&cand, Turn::new(cand.theta)),
                 (icp, cos_max),
-                &mut pairs,
+                pairs,
             );
             if s.score < pick.1.score {
                 pick = (cand, s);
             }
         }
-        let refined = icp_inner(plan, obs, &pick.0, centre, icp, &mut pairs);
+        let refined = icp_inner(plan, obs, &pick.0, centre, icp, pairs);
         iterations = iterations.saturating_add(refined.iterations);
         let next = if refined.score < pick.1.score {
             (

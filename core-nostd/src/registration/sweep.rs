@@ -4,7 +4,7 @@
 //! ICPs from several start headings pick where it starts. Split from [`super::icp`], whose
 //! ICP, correspondences and annealing it calls.
 
-use super::icp::{check_inputs, icp_inner, match_pairs, Pairs};
+use super::icp::{check_inputs, icp_inner, match_pairs, register_centred_with, Pairs};
 use super::*;
 use crate::world::geometry::Turn;
 
@@ -39,8 +39,10 @@ pub fn register_multistart(
 /// sweep only picks the start of the annealing; issue 22 measured most of the
 /// refinement's cost in sweep ICPs run to a 10 µm tolerance), after which the `keep` best
 /// starts are run on to convergence and the best of all is the annealing's start: a short
-/// sweep alone ranks some starts before they reach their basin.
+/// sweep alone ranks some starts before they reach their basin. Never inlined: its pair
+/// buffer (14 KB) would stay in the caller's frame (`register_centred_with`).
 #[allow(clippy::too_many_arguments)]
+#[inline(never)]
 pub fn register_multistart_capped(
     plan: &FloorPlan,
     obs: &Observations,
@@ -102,7 +104,7 @@ pub fn register_multistart_capped(
         }
     }
     let start = best.map(|(p, _)| p).unwrap_or(*initial);
-    register_centred(plan, obs, &start, initial, params)
+    register_centred_with(plan, obs, &start, initial, params, &mut pairs)
 }
 
 /// Most heading starts a sweep runs ([`register_multistart_capped`]).

@@ -61,15 +61,30 @@ pub mod fpu {
         unsafe { activesense_vsqrtf(x) }
     }
 }
-/// Sine.
+/// Sine: libm's `sinf`, bit for bit. On the M4F (no double-precision FPU) computed in
+/// fixed point by [`super::trig::sinf`], about a tenth of libm's instructions there.
 #[inline]
 pub fn sin(x: f32) -> f32 {
-    libm::sinf(x)
+    #[cfg(target_arch = "arm")]
+    {
+        super::trig::sinf(x)
+    }
+    #[cfg(not(target_arch = "arm"))]
+    {
+        libm::sinf(x)
+    }
 }
-/// Cosine.
+/// Cosine: libm's `cosf`, bit for bit (on the M4F by [`super::trig::cosf`]).
 #[inline]
 pub fn cos(x: f32) -> f32 {
-    libm::cosf(x)
+    #[cfg(target_arch = "arm")]
+    {
+        super::trig::cosf(x)
+    }
+    #[cfg(not(target_arch = "arm"))]
+    {
+        libm::cosf(x)
+    }
 }
 /// Two-argument arc tangent.
 #[inline]

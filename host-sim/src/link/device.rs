@@ -216,6 +216,7 @@ pub const HOST_DEVICE: SessionConfig = SessionConfig {
     max_reply_ms: 5_000,
     cycle_clock: None,
     policies: &activesense_core::policy::builtin::POLICIES,
+    stack_usage: None,
 };
 
 /// Serves the protocol from `session` over a std stream whose reads time out (the
