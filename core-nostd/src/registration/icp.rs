@@ -6,6 +6,7 @@
 use super::*;
 use crate::limits::MAX_VERTICES;
 use crate::world::geometry::Turn;
+use crate::world::sightlines::Sightlines;
 
 /// Acceleration: smallest cosine between consecutive ICP steps that counts as "the same
 /// direction".
@@ -224,7 +225,7 @@ pub(super) type Pairs = HVec<Pair, MAX_OBSERVATIONS>;
 /// wall (facing the ray, incidence within `cos_max`, visible from the instrument), else the
 /// plain nearest point with weight `relaxed_w`.
 fn correspond(
-    plan: &FloorPlan,
+    (plan, sight): (&FloorPlan, &Sightlines),
     o: &ObsPoint,
     pose: &Pose2,
     (sin_h, cos_h): (f32, f32),
@@ -272,7 +273,9 @@ fn correspond(
         }
         let Some(k) = best else { break };
         let (d2, m, i) = feasible[k];
-        if plan.visible(origin, m, VISIBILITY_TOLERANCE) {
+        // `plan.visible(origin, m, VISIBILITY_TOLERANCE)`, the viewpoint's walls worked out
+        // once per pass.
+        if sight.visible(m, VISIBILITY_TOLERANCE) {
             let nrm = plan.outward_normal(i as usize);
             return Pair {
                 m,
@@ -363,13 +366,14 @@ pub(super) fn match_pairs(
 ) -> ErrorSummary {
     pairs.clear();
     let sc = heading.to(pose.theta).sin_cos();
+    let sight = Sightlines::new(plan, pose.translation());
     for (i, o) in obs.pts.iter().enumerate() {
         if params.excludes(i) {
             continue;
         }
         // Same capacity as the observation set.
         let _ = pairs.push(correspond(
-            plan,
+            (plan, &sight),
             o,
             pose,
             sc,
@@ -611,41 +615,6 @@ pub(super) fn icp_inner(
         iterations,
         rounds: 0,
         converged,
-    }
-}
-
-/// Standard-normal samples from a seeded [`Pcg32`] via Box–Muller in f32 (libm), identical
-/// on every target.
-#[derive(Clone, Debug)]
-pub struct GaussianRng {
-    rng: Pcg32,
-    spare: Option<f32>,
-}
-
-impl GaussianRng {
-    /// Seeds the generator.
-    pub fn new(seed: u64) -> Self {
-        GaussianRng {
-            rng: Pcg32::seed_from_u64(seed),
-            spare: None,
-        }
-    }
-
-    /// Uniform in the open interval (0, 1) with 24-bit resolution.
-    pub fn uniform(&mut self) -> f32 {
-        ((self.rng.next_u32() >> 8) as f32 + 0.5) * (1.0 / 16_777_216.0)
-    }
-
-    /// One N(0, 1) sample.
-    pub fn normal(&mut self) -> f32 {
-        if let Some(z) = self.spare.take() {
-            return z;
-        }
-        let (u1, u2) = (self.uniform(), self.uniform());
-        let r = sqrt(-2.0 * ln(u1));
-        let a = TAU * u2;
-        self.spare = Some(r * sin(a));
-        r * cos(a)
     }
 }
 
@@ -985,7 +954,7 @@ mod tests {
             d: v2(-1.0, 0.0),
         };
         let pr = correspond(
-            &r,
+            (&r, &Sightlines::new(&r, Pose2::IDENTITY.translation())),
             &o,
             &Pose2::IDENTITY,
             (0.0, 1.0),
@@ -1003,7 +972,7 @@ mod tests {
             d: unit(PI / 3.0),
         };
         let pr = correspond(
-            &r,
+            (&r, &Sightlines::new(&r, Pose2::IDENTITY.translation())),
             &o,
             &Pose2::IDENTITY,
             (0.0, 1.0),
@@ -1021,7 +990,7 @@ mod tests {
             d: v2(-1.0, 0.0),
         };
         let pr = correspond(
-            &r,
+            (&r, &Sightlines::new(&r, pose.translation())),
             &o,
             &pose,
             (sin(pose.theta), cos(pose.theta)),
@@ -1064,7 +1033,7 @@ mod tests {
             d: dir,
         };
         let pr = correspond(
-            &l,
+            (&l, &Sightlines::new(&l, pose.translation())),
             &o,
             &pose,
             (sin(pose.theta), cos(pose.theta)),
@@ -1082,7 +1051,7 @@ mod tests {
             d: dir,
         };
         let pr = correspond(
-            &l,
+            (&l, &Sightlines::new(&l, pose.translation())),
             &o,
             &pose,
             (sin(pose.theta), cos(pose.theta)),

@@ -75,12 +75,14 @@
 //! instead of 4.3 cm, because it commits early to the coarse pose's basin.) The loop stops after
 //! [`AnnealParams::patience`] rounds without improvement, when `E` falls below
 //! [`AnnealParams::min_error`], or after [`AnnealParams::max_rounds`]. Gaussian noise comes
-//! from a seeded [`Pcg32`] through Box–Muller in f32 (libm), so a seed fixes the result
-//! bit for bit on host and MCU. Nothing is allocated; the per-call scratch is a few KiB of
-//! stack ([`MAX_OBSERVATIONS`] pairs, ≈ 14 KiB at 500).
+//! from a seeded [`Pcg32`] through Box–Muller in f32 (libm; [`gaussian`]), so a seed fixes the
+//! result bit for bit on host and MCU. Nothing is allocated; the per-call scratch is a few KiB
+//! of stack ([`MAX_OBSERVATIONS`] pairs, ≈ 14 KiB at 500: one buffer per registration, lent
+//! from the heading sweep to the annealing it ends in, README "The stack").
 
 pub mod budget;
 pub mod fits;
+pub mod gaussian;
 pub mod icp;
 pub mod pose_distance;
 pub mod precision;
@@ -88,6 +90,7 @@ pub mod refine;
 pub mod sweep;
 
 pub use fits::*;
+pub use gaussian::*;
 pub use icp::*;
 pub use sweep::*;
 
