@@ -380,17 +380,22 @@ impl FloorPlan {
     }
 
     /// True when the straight line from `from` to `to` crosses no wall before `to`
-    /// (within `tolerance` metres of it). Used for wall-junction visibility.
+    /// (within `tolerance` metres of it). Used for wall-junction visibility. The same as
+    /// "[`FloorPlan::first_hit`] along it is no nearer than `to`", decided at the first
+    /// wall that blocks (tested against that form in `world::sightlines`, which answers
+    /// many sight lines from one viewpoint with this test).
     pub fn visible(&self, from: Vec2, to: Vec2, tolerance: f32) -> bool {
         let d = to - from;
         let dist = length(d);
         if dist <= tolerance {
             return true;
         }
-        match self.first_hit(from, d / dist) {
-            Some(range) => range >= dist - tolerance,
-            None => true,
-        }
+        let (dir, before) = (d / dist, dist - tolerance);
+        !(0..self.len()).any(|i| {
+            let (a, b) = self.wall(i);
+            let (w, e) = (a - from, b - a);
+            blocks((w, e, cross(w, e)), dir, before)
+        })
     }
 
     /// The range of [`FloorPlan::ray_cast`]'s hit alone (the same arithmetic, without the
@@ -437,6 +442,23 @@ pub fn closest_on_segment(p: Vec2, a: Vec2, b: Vec2) -> Vec2 {
     }
     let t = (((p - a).x * ab.x + (p - a).y * ab.y) / l2).clamp(0.0, 1.0);
     a + ab * t
+}
+
+/// Whether the ray along unit `dir` from a viewpoint crosses wall `a → b` at a distance in
+/// `(1e-6, before)`, the wall given as `(a - viewpoint, b - a, their cross product)`: the
+/// per-wall test of [`FloorPlan::visible`], with [`FloorPlan::first_hit`]'s arithmetic.
+#[inline]
+pub(crate) fn blocks((w, e, cross_we): (Vec2, Vec2, f32), dir: Vec2, before: f32) -> bool {
+    let denom = cross(dir, e);
+    if abs(denom) < 1e-12 {
+        return false; // parallel
+    }
+    let t = cross_we / denom; // along the ray
+    if !(t > 1e-6 && t < before) {
+        return false;
+    }
+    let u = cross(w, dir) / denom; // along the wall
+    (0.0..=1.0).contains(&u)
 }
 
 /// True when closed segments `ab` and `cd` share at least one point.
