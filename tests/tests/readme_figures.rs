@@ -425,7 +425,7 @@ fn the_ablation_table_is_results_ablations() {
     assert_eq!(checked, 8, "the ablation table has 8 rows");
 }
 
-/// The three-seed ablation tables are `docs/analysis/ablation_seeds.py`'s output, row for row.
+/// The three-seed ablation tables are the `ablation_seeds` example's output, row for row.
 #[test]
 fn the_ablation_seed_tables_are_results_ablations_seeds() {
     let readme = read("README.md");
