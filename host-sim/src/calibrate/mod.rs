@@ -5,7 +5,7 @@
 //! whose belief passes the stop gate, the pipeline's [`StopFeatures`] are recorded with the
 //! label "the answer is wrong": the refined pose the stop would answer with is outside the
 //! surveyor's tolerance of the truth (5 cm and 0.5° modulo symmetry,
-//! [`Tolerance::SURVEYOR`], what the no-oracle table judges). A logistic
+//! [`Tolerance::SURVEYOR`](activesense_core::registration::pose_distance::Tolerance::SURVEYOR), what the no-oracle table judges). A logistic
 //! regression per rotation setting (Newton–Raphson / IRLS in f64 with a small ridge) is
 //! fitted on the even-indexed plans and checked on the odd-indexed ones: the reliability
 //! of its estimate at every step, and what the stop rule "stop at the first step whose

@@ -138,6 +138,8 @@ pub fn agreement(a: AgreementArgs) -> Result<()> {
 /// `activesense policy upload`.
 #[derive(Args, Debug)]
 pub struct PolicyUploadArgs {
+    // clap's help text: the brackets are optional parts, not rustdoc links.
+    #[allow(rustdoc::broken_intra_doc_links)]
     /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
     #[arg(long)]
     pub link: LinkSpec,
@@ -157,6 +159,8 @@ pub struct PolicyUploadArgs {
 /// `activesense policy info`.
 #[derive(Args, Debug)]
 pub struct PolicyInfoArgs {
+    // clap's help text: the brackets are optional parts, not rustdoc links.
+    #[allow(rustdoc::broken_intra_doc_links)]
     /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
     #[arg(long)]
     pub link: LinkSpec,

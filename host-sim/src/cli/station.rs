@@ -82,6 +82,8 @@ impl GeoComLink {
 /// `activesense station`.
 #[derive(Args, Debug)]
 pub struct StationArgs {
+    // clap's help text: the brackets are an optional part, not a rustdoc link.
+    #[allow(rustdoc::broken_intra_doc_links)]
     /// The instrument: geocom:serial:/dev/ttyUSB0[:BAUD] (default 19200 baud) or
     /// geocom:tcp:HOST:PORT (Bluetooth/Wi-Fi bridge, `activesense geocom-sim`).
     #[arg(long)]

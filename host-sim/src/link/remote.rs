@@ -83,6 +83,8 @@ pub struct RemoteEpisodeArgs {
 /// `activesense sim`.
 #[derive(Args, Debug)]
 pub struct SimArgs {
+    // clap's help text: the brackets are optional parts, not rustdoc links.
+    #[allow(rustdoc::broken_intra_doc_links)]
     /// loopback | qemu[:ELF] | tcp:HOST:PORT | serial:PATH[@BAUD]
     #[arg(long, default_value = "loopback")]
     pub link: LinkSpec,
