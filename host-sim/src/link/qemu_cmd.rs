@@ -1,6 +1,6 @@
 //! The QEMU command line for the firmware's board, in one place: `qemu-system-arm` emulating
 //! the netduinoplus2 (STM32F405, Cortex-M4) with semihosting on, no monitor, no graphics, and
-//! USART1 (`serial0`) wherever the caller points it. [`crate::link::device::Qemu`] (the `qemu` link)
+//! USART1 (`serial0`) wherever the caller points it. `link::device::Qemu` (the `qemu` link)
 //! and `cargo xtask` (the smoke boot) both build their emulator from [`qemu_command`].
 //!
 //! Why this file is shared by path and not by a dependency: xtask must build and run before
