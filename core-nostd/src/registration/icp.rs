@@ -1001,24 +1001,8 @@ mod tests {
         assert!((pr.m - v2(2.0, 0.0)).norm() < 1e-5 && (pr.dist - 0.1).abs() < 1e-5);
         // L-room, instrument in the lower arm: the nearest wall to the observation is the
         // hidden upper-arm wall, the visible constrained match is the far one.
-        let l = plan(&[
-            (0.0, 0.0),
-            (6.0, 0.0),
-            (6.0, 2.0),
-            (3.0, 2.0),
-            (3.0, 4.0),
-            (0.0, 4.0),
-        ]);
-        let c = FloorPlan::new(&[
-            v2(0.0, 0.0),
-            v2(6.0, 0.0),
-            v2(6.0, 2.0),
-            v2(3.0, 2.0),
-            v2(3.0, 4.0),
-            v2(0.0, 4.0),
-        ])
-        .unwrap()
-        .perimeter_centroid();
+        let room = FloorPlan::new(&crate::world::floorplan::l_room_6x4()).unwrap();
+        let (l, c) = (room.centered(), room.perimeter_centroid());
         // Original coordinates: instrument at (5, 1) in the lower arm, observation at
         // (2.5, 3.9) near the top wall of the upper arm. The top wall (0.1 away) faces the
         // ray but is hidden behind the notch wall y = 2, and so is the left wall x = 0;

@@ -250,14 +250,9 @@ mod tests {
     }
 
     fn l_room() -> FloorPlan {
-        plan(&[
-            (0.0, 0.0),
-            (6.0, 0.0),
-            (6.0, 2.0),
-            (3.0, 2.0),
-            (3.0, 4.0),
-            (0.0, 4.0),
-        ])
+        FloorPlan::new(&crate::world::floorplan::l_room_6x4())
+            .unwrap()
+            .centered()
     }
 
     fn square() -> FloorPlan {

@@ -492,6 +492,20 @@ fn on_segment(a: Vec2, b: Vec2, p: Vec2) -> bool {
         && p.y <= a.y.max(b.y) + 1e-6
 }
 
+/// The 6 × 4 m L-room of the geometry and registration tests (the top-right 3 × 2 corner cut
+/// away), in its own frame: one room, so their hand-worked coordinates agree.
+#[cfg(test)]
+pub(crate) fn l_room_6x4() -> [Vec2; 6] {
+    [
+        v2(0.0, 0.0),
+        v2(6.0, 0.0),
+        v2(6.0, 2.0),
+        v2(3.0, 2.0),
+        v2(3.0, 4.0),
+        v2(0.0, 4.0),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -504,15 +518,7 @@ mod tests {
 
     /// L-room: 6 x 4 with the top-right 3 x 2 corner cut away.
     fn l_room() -> FloorPlan {
-        FloorPlan::new(&[
-            v2(0.0, 0.0),
-            v2(6.0, 0.0),
-            v2(6.0, 2.0),
-            v2(3.0, 2.0),
-            v2(3.0, 4.0),
-            v2(0.0, 4.0),
-        ])
-        .unwrap()
+        FloorPlan::new(&l_room_6x4()).unwrap()
     }
 
     #[test]

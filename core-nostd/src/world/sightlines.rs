@@ -69,14 +69,7 @@ mod tests {
                 v2(r * libm::cosf(a), r * libm::sinf(a))
             })
             .collect();
-        let l = [
-            v2(0.0, 0.0),
-            v2(6.0, 0.0),
-            v2(6.0, 2.0),
-            v2(3.0, 2.0),
-            v2(3.0, 4.0),
-            v2(0.0, 4.0),
-        ];
+        let l = crate::world::floorplan::l_room_6x4();
         let mut comb: heapless::Vec<Vec2, MAX_VERTICES> = heapless::Vec::new();
         let _ = comb.push(v2(0.0, 0.0));
         let _ = comb.push(v2(10.0, 0.0));
