@@ -43,10 +43,15 @@ impl MeanCi {
 
 /// Wilson score interval for a proportion (95 %), well behaved near 0 and 1.
 pub fn wilson(successes: u32, n: u32) -> (f64, f64) {
+    wilson_at(successes, n, 1.96)
+}
+
+/// The Wilson score interval at `z` standard errors: 1.96 for the two-sided 95 %
+/// interval, 1.645 for a one-sided 95 % bound.
+pub fn wilson_at(successes: u32, n: u32, z: f64) -> (f64, f64) {
     if n == 0 {
         return (0.0, 1.0);
     }
-    let z = 1.96f64;
     let n = n as f64;
     let p = successes as f64 / n;
     let denom = 1.0 + z * z / n;

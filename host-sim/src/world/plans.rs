@@ -34,11 +34,17 @@ pub const TEST_SEEDS: Range<u32> = 1_000_000..1_001_000;
 /// picked among its training seeds (`host-sim/examples/select_seed.rs`): drawn neither for
 /// training nor for the test.
 pub const VALIDATION_SEEDS: Range<u32> = 1_001_000..1_002_000;
+/// Seeds of the calibrated stop's plans (`activesense calibrate`): outside the training
+/// range, so that the learnt policy meets them as an instrument meets a building, for the
+/// first time, and far above the test and validation sets and the out-of-sample checks
+/// that follow them.
+pub const CALIBRATION_SEEDS: Range<u32> = 2_000_000..3_000_000;
 // The published seed ranges are disjoint and the test set has 1000 plans (checked at
 // compile time).
 const _: () = assert!(TRAIN_SEEDS.end <= TEST_SEEDS.start);
 const _: () = assert!(TEST_SEEDS.end <= VALIDATION_SEEDS.start);
 const _: () = assert!(TEST_SEEDS.end - TEST_SEEDS.start == 1000);
+const _: () = assert!(VALIDATION_SEEDS.end <= CALIBRATION_SEEDS.start);
 
 /// Smallest bounding-box side (m).
 pub const MIN_SIDE: f32 = 3.0;
