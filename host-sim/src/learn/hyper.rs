@@ -79,6 +79,13 @@ pub struct HyperParams {
     /// without the final-registration-error term).
     #[arg(long, default_value_t = 1.0)]
     pub registration_reward: f32,
+    /// Reward: −this × min((e − e_tol) / e_tol, 1) for a final registration error e beyond
+    /// e_tol (0: the paper's clipped term alone). The clipped term says nothing about gross
+    /// registrations, and they decide the mean pose error (`docs/LEARNING.md`, "A penalty
+    /// for gross registrations").
+    #[arg(long, default_value_t = 0.0)]
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub registration_penalty: f32,
     /// What ends a training episode: `oracle` (the paper's: the first coarse success) or
     /// `confident` (the calibrated stop an instrument uses; the answer is then rewarded
     /// +1 when right within the surveyor's tolerance and −`--wrong-penalty` when wrong).
@@ -138,6 +145,12 @@ pub struct HyperParams {
 
 fn one() -> u64 {
     1
+}
+
+/// Leaves a switch that is off out of the policy file's metadata, so that the files of
+/// commands without it stay as they were.
+fn is_zero(x: &f32) -> bool {
+    *x == 0.0
 }
 
 fn default_clip_coef() -> f32 {
@@ -234,6 +247,7 @@ mod tests {
             log_every: 10,
             inputs: InputMask::Full,
             registration_reward: 1.0,
+            registration_penalty: 0.0,
             termination: Termination::Oracle,
             wrong_penalty: 2.0,
             gamma: 0.99,

@@ -78,7 +78,8 @@ pub enum Ending {
 }
 
 /// The end-of-episode reward: right (+`success_reward`), wrong (−`wrong_penalty`) or the
-/// action limit (−`limit_penalty`), plus the clipped quadratic registration term.
+/// action limit (−`limit_penalty`), plus the clipped quadratic registration term and, with
+/// `registration_penalty`, a penalty that ramps up from the clip to twice it.
 pub fn final_reward(hp: &HyperParams, ending: Ending, pose_error: Option<f32>) -> f32 {
     let outcome = match ending {
         Ending::Right => hp.success_reward,
@@ -88,7 +89,12 @@ pub fn final_reward(hp: &HyperParams, ending: Ending, pose_error: Option<f32>) -
     let reg = pose_error
         .map(|e| {
             let x = e / hp.registration_tolerance;
-            hp.registration_reward * (1.0 - (x * x).min(1.0))
+            let clipped = hp.registration_reward * (1.0 - (x * x).min(1.0));
+            if hp.registration_penalty > 0.0 {
+                clipped - hp.registration_penalty * (x - 1.0).clamp(0.0, 1.0)
+            } else {
+                clipped
+            }
         })
         .unwrap_or(0.0);
     outcome + reg
@@ -986,6 +992,15 @@ mod tests {
         assert!((final_reward(&hp, Ending::Right, Some(0.05)) - 1.75).abs() < 1e-6);
         assert_eq!(final_reward(&hp, Ending::Limit, None), -1.0);
         assert_eq!(final_reward(&hp, Ending::Wrong, Some(0.5)), -2.0);
+        // The gross-registration penalty: nothing within the clip, half of it at 1.5 × the
+        // clip, all of it from twice the clip on.
+        let penalised = HyperParams {
+            registration_penalty: 0.5,
+            ..hp.clone()
+        };
+        assert!((final_reward(&penalised, Ending::Right, Some(0.05)) - 1.75).abs() < 1e-6);
+        assert!((final_reward(&penalised, Ending::Right, Some(0.15)) - 0.75).abs() < 1e-6);
+        assert!((final_reward(&penalised, Ending::Right, Some(0.5)) - 0.5).abs() < 1e-6);
         let visits = [0u64, 1000, 3000];
         assert!((bonus(&hp, &visits, 0) - hp.exploration_bonus).abs() < 1e-9);
         assert!((bonus(&hp, &visits, 1) - hp.exploration_bonus / 2.0).abs() < 1e-9);
