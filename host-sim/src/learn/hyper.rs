@@ -83,7 +83,7 @@ pub struct HyperParams {
     /// e_tol (0: the paper's clipped term alone). The clipped term says nothing about gross
     /// registrations, and they decide the mean pose error (`docs/LEARNING.md`, "A penalty
     /// for gross registrations").
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_non_negative)]
     #[serde(default, skip_serializing_if = "is_zero")]
     pub registration_penalty: f32,
     /// What ends a training episode: `oracle` (the paper's: the first coarse success) or
@@ -174,6 +174,16 @@ fn parse_termination(s: &str) -> Result<Termination, String> {
             Err("a training episode ends by `oracle` or `confident`, not `action-limit`".into())
         }
         t => Ok(t),
+    }
+}
+
+/// A reward weight: a finite number, not negative (a negative penalty would reward gross
+/// registrations).
+fn parse_non_negative(s: &str) -> Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        Ok(_) => Err(format!("'{s}' is not a finite number ≥ 0")),
+        Err(e) => Err(format!("'{s}': {e}")),
     }
 }
 
@@ -282,6 +292,14 @@ mod tests {
         assert!(cmd
             .try_get_matches_from(["--rot-bins", "1", "--envs", "0"])
             .is_err());
+        for bad in ["-0.5", "NaN", "inf", "half"] {
+            let cmd = HyperParams::augment_args(clap::Command::new("t").no_binary_name(true));
+            let flag = format!("--registration-penalty={bad}");
+            let e = cmd
+                .try_get_matches_from(["--rot-bins", "1", flag.as_str()])
+                .unwrap_err();
+            assert!(e.to_string().contains(bad), "{e}");
+        }
     }
 
     /// The anneal starts at --lr on the first A2C update, ends at --lr / (A2C updates) on
