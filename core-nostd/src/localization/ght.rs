@@ -47,7 +47,9 @@ use serde::{Deserialize, Serialize};
 
 use super::grid::{self, CellIndex, GridSpec, Mode};
 use super::rtable::RTable;
-use super::vote::{vote_layer, vote_window, window_candidates, EntropyAcc, QTAB_LEN};
+use super::vote::{
+    vote_layer, vote_window, vote_window_exact, window_candidates, EntropyAcc, QTAB_LEN,
+};
 pub use super::vote::{KERNEL_LEN, KERNEL_Q_MAX, VOTE_QUANTA};
 use super::{
     Confidence, LocError, LocalizerConfig, MAX_CELLS, MAX_LAYER_CELLS, MAX_RTABLE_POINTS,
@@ -130,7 +132,7 @@ pub struct GhtLocalizer {
 /// The coarse-to-fine argmax's sums ([`GhtLocalizer::refine_argmax`]) for the window
 /// around `centre`, over the first `readings` readings: 3 bins × [`FINE_SUB_BINS`]
 /// headings × 9 cells (1.7 KiB; a reading adds at most [`VOTE_QUANTA`] to a sum, so u16
-/// holds the longest episode).
+/// holds the longest episode), or at `K = 1` the unquantised votes of the 9 cells.
 #[derive(Clone, Debug)]
 struct FineSums {
     centre: Option<CellIndex>,
@@ -138,6 +140,8 @@ struct FineSums {
     /// Bits of the last reading summed.
     last: (u32, u32),
     sums: [[[u16; 9]; FINE_SUB_BINS as usize]; 3],
+    /// `K = 1`: Σ `exp(−q)` per window cell, summed in reading order.
+    exact: [f32; 9],
 }
 
 // Every reading of the longest episode fits a u16 sum.
@@ -154,6 +158,7 @@ impl FineSums {
         readings: 0,
         last: (0, 0),
         sums: [[[0; 9]; FINE_SUB_BINS as usize]; 3],
+        exact: [0.0; 9],
     };
 }
 
@@ -429,16 +434,16 @@ impl GhtLocalizer {
     /// the figure in `results/mcu-bench/` (module docs of [`crate::registration::refine`]).
     pub fn refine_argmax(&mut self, readings: impl Iterator<Item = (f32, f32)> + Clone) {
         self.fine = None;
-        if self.grid.rot_bins <= 1 {
-            return;
-        }
         let Some(c0) = self.coarse_argmax() else {
             return;
         };
+        let known_heading = self.grid.rot_bins <= 1;
         let mut cfg = self.cfg;
-        cfg.sub_bins = FINE_SUB_BINS;
+        if !known_heading {
+            cfg.sub_bins = FINE_SUB_BINS;
+        }
         let (cx, cy) = (c0.ix as i32, c0.iy as i32);
-        let k = self.grid.rot_bins as i32;
+        let k = self.grid.rot_bins.max(1) as i32;
         let bins = [0i32, -1, 1].map(|d| (c0.bin as i32 + d).rem_euclid(k) as u8);
         let sums = &mut self.fine_sums;
         if sums.centre != Some(c0) {
@@ -461,24 +466,40 @@ impl GhtLocalizer {
             }
             let mut cand = [0u16; MAX_RTABLE_POINTS];
             let nc = window_candidates(&self.grid, &cfg, &self.rtable, range, (cx, cy), &mut cand);
-            for (b, &bin) in bins.iter().enumerate() {
-                for f in 0..FINE_SUB_BINS {
-                    let win = vote_window(
-                        &self.grid,
-                        (&cfg, cos_min),
-                        &self.rtable,
-                        &cand[..nc],
-                        &self.interior,
-                        &self.kernel,
-                        bin,
-                        f,
-                        bearing,
-                        range,
-                        (cx, cy),
-                    );
-                    for (sum, &v) in sums.sums[b][f as usize].iter_mut().zip(win.iter()) {
-                        // ≤ VOTE_QUANTA per reading: no overflow below 4096 readings.
-                        *sum = sum.saturating_add(v as u16);
+            if known_heading {
+                let win = vote_window_exact(
+                    &self.grid,
+                    (&cfg, cos_min),
+                    &self.rtable,
+                    &cand[..nc],
+                    &self.interior,
+                    bearing,
+                    range,
+                    (cx, cy),
+                );
+                for (sum, &v) in sums.exact.iter_mut().zip(win.iter()) {
+                    *sum += v;
+                }
+            } else {
+                for (b, &bin) in bins.iter().enumerate() {
+                    for f in 0..FINE_SUB_BINS {
+                        let win = vote_window(
+                            &self.grid,
+                            (&cfg, cos_min),
+                            &self.rtable,
+                            &cand[..nc],
+                            &self.interior,
+                            &self.kernel,
+                            bin,
+                            f,
+                            bearing,
+                            range,
+                            (cx, cy),
+                        );
+                        for (sum, &v) in sums.sums[b][f as usize].iter_mut().zip(win.iter()) {
+                            // ≤ VOTE_QUANTA per reading: no overflow below 4096 readings.
+                            *sum = sum.saturating_add(v as u16);
+                        }
                     }
                 }
             }
@@ -489,25 +510,30 @@ impl GhtLocalizer {
             self.fine_sums.reset(c0);
             return self.refine_argmax(all);
         }
-        let sums = &self.fine_sums.sums;
-        let best = self.best_in_window(c0, &bins, |b, w| {
-            sums[b].iter().map(|h| h[w] as u32).max().unwrap_or(0)
-        });
+        let best = if known_heading {
+            let exact = &self.fine_sums.exact;
+            self.best_in_window(c0, &[c0.bin], |_, w| exact[w])
+        } else {
+            let sums = &self.fine_sums.sums;
+            self.best_in_window(c0, &bins, |b, w| {
+                sums[b].iter().map(|h| h[w] as u32).max().unwrap_or(0)
+            })
+        };
         self.fine = Some((self.updates, best));
     }
 
     /// The interior cell of the 3 × 3 × 3 window around `c0` (bins `bins`) with the most
     /// votes, `votes(b, w)` being window cell `w`'s in bin `bins[b]` at its best fine
     /// heading; the coarse argmax `c0` keeps ties.
-    fn best_in_window(
+    fn best_in_window<T: Copy + Default + PartialOrd>(
         &self,
         c0: CellIndex,
-        bins: &[u8; 3],
-        votes: impl Fn(usize, usize) -> u32,
+        bins: &[u8],
+        votes: impl Fn(usize, usize) -> T,
     ) -> CellIndex {
         let (nx, ny) = (self.grid.nx as i32, self.grid.ny as i32);
         let (cx, cy) = (c0.ix as i32, c0.iy as i32);
-        let mut best = (0u32, c0);
+        let mut best = (T::default(), c0);
         for (b, &bin) in bins.iter().enumerate() {
             for w in 0..9 {
                 let (x, y) = (cx + w as i32 % 3 - 1, cy + w as i32 / 3 - 1);
@@ -538,6 +564,39 @@ impl GhtLocalizer {
     ) {
         self.fine = None;
         if self.grid.rot_bins <= 1 {
+            // Heading known: every reading's exact window votes, summed from scratch.
+            let Some(c0) = self.coarse_argmax() else {
+                return;
+            };
+            let cos_min = cos(self.cfg.max_incidence);
+            let window = (c0.ix as i32, c0.iy as i32);
+            let mut exact = [0f32; 9];
+            for (bearing, range) in readings {
+                let mut cand = [0u16; MAX_RTABLE_POINTS];
+                let nc = window_candidates(
+                    &self.grid,
+                    &self.cfg,
+                    &self.rtable,
+                    range,
+                    window,
+                    &mut cand,
+                );
+                let win = vote_window_exact(
+                    &self.grid,
+                    (&self.cfg, cos_min),
+                    &self.rtable,
+                    &cand[..nc],
+                    &self.interior,
+                    bearing,
+                    range,
+                    window,
+                );
+                for (sum, v) in exact.iter_mut().zip(win) {
+                    *sum += v;
+                }
+            }
+            let best = self.best_in_window(c0, &[c0.bin], |_, w| exact[w]);
+            self.fine = Some((self.updates, best));
             return;
         }
         let Some(c0) = self.coarse_argmax() else {

@@ -596,13 +596,85 @@ fn fine_argmax_corrects_heading_quantisation() {
     );
 }
 
+/// With the heading known, truths a few millimetres inside a cell's edge: the accumulator's
+/// quantised votes often tie the two cells, and the coarse argmax then takes the first;
+/// the window's unquantised votes take the cell nearer the truth more often.
+#[test]
+fn known_heading_window_argmax_takes_the_cell_near_an_edge() {
+    let p = l_room();
+    let heading = 0.3;
+    let mut l = boxed(&p, &LocalizerConfig::known_heading(heading));
+    let mut rng = Pcg32::seed_from_u64(5);
+    let (mut coarse_right, mut fine_right, mut tried) = (0, 0, 0);
+    while tried < 60 {
+        let g = *l.grid();
+        let (ix, iy) = (rng.next_u32() % g.nx as u32, rng.next_u32() % g.ny as u32);
+        let c = g.cell_centre(ix as usize, iy as usize);
+        // 2 to 10 mm inside one of the cell's four edges, anywhere along it.
+        let inside = 0.002 + 0.008 * uniform(&mut rng);
+        let along = uniform(&mut rng) - 0.5;
+        let side = if rng.next_u32() % 2 == 0 { 1.0 } else { -1.0 };
+        let a = if rng.next_u32() % 2 == 0 {
+            v2(
+                c.x + side * (0.5 * g.cell[0] - inside),
+                c.y + along * g.cell[1],
+            )
+        } else {
+            v2(
+                c.x + along * g.cell[0],
+                c.y + side * (0.5 * g.cell[1] - inside),
+            )
+        };
+        if !p.contains(a) || !p.contains(c) {
+            continue;
+        }
+        let truth = Pose2::new(a.x, a.y, heading);
+        l.clear();
+        let mut readings: Vec<(f32, f32)> = Vec::new();
+        let mut k = 0;
+        while readings.len() < 12 && k < 54 * 5 {
+            if let Some((b, r)) = measure(&p, &truth, k) {
+                l.update(b, r).unwrap();
+                readings.push((b, r));
+            }
+            k += 7;
+        }
+        if readings.len() < 12 {
+            continue;
+        }
+        tried += 1;
+        let coarse = l.coarse_argmax().unwrap();
+        l.refine_argmax(readings.iter().copied());
+        let fine = l.argmax().unwrap();
+        assert!(l.grid().near(coarse, fine, 1), "{coarse:?} {fine:?}");
+        coarse_right += l.grid().coarse_success(coarse, &truth, 1) as u32;
+        fine_right += l.coarse_success(&truth, 1) as u32;
+    }
+    assert!(
+        fine_right > coarse_right,
+        "fine {fine_right} vs coarse {coarse_right} of 60"
+    );
+}
+
 /// The incremental, windowed coarse-to-fine argmax (refined after every reading, as the
 /// pipeline does) picks the same cell as the full re-vote of every reading, at every step,
 /// outliers included.
 #[test]
 fn fine_argmax_is_incremental_and_exact() {
+    fine_argmax_is_incremental_and_exact_for(None);
+}
+
+/// The same with the heading known (`K = 1`, the window's unquantised votes).
+#[test]
+fn known_heading_window_argmax_is_incremental_and_exact() {
+    fine_argmax_is_incremental_and_exact_for(Some(0.3));
+}
+
+/// [`fine_argmax_is_incremental_and_exact`] with `known_heading`: `K = 1` at that heading,
+/// else the default `K = 10` with the truth's heading drawn.
+fn fine_argmax_is_incremental_and_exact_for(known_heading: Option<f32>) {
     let p = l_room();
-    let cfg = LocalizerConfig::default();
+    let cfg = known_heading.map_or(LocalizerConfig::default(), LocalizerConfig::known_heading);
     let mut l = boxed(&p, &cfg);
     let mut reference = boxed(&p, &cfg);
     let mut rng = Pcg32::seed_from_u64(77);
@@ -616,7 +688,8 @@ fn fine_argmax_is_incremental_and_exact() {
             continue;
         }
         episodes += 1;
-        let truth = Pose2::new(a.x, a.y, TAU * uniform(&mut rng));
+        let heading = known_heading.unwrap_or_else(|| TAU * uniform(&mut rng));
+        let truth = Pose2::new(a.x, a.y, heading);
         l.clear();
         reference.clear();
         let mut readings: Vec<(f32, f32)> = Vec::new();

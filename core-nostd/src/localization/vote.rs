@@ -6,7 +6,7 @@ use super::grid::GridSpec;
 use super::rtable::RTable;
 use super::{LocalizerConfig, MAX_LAYER_CELLS};
 use crate::world::geometry::{unit, Vec2};
-use crate::world::math::{ln, sqrt};
+use crate::world::math::{exp, ln, sqrt};
 
 /// Vote quantum: a measurement adds `round(w·VOTE_QUANTA)` (`w ∈ [0, 1]`) to a slot.
 pub const VOTE_QUANTA: u8 = 16;
@@ -83,9 +83,72 @@ pub(super) fn vote_window(
     s: u8,
     bearing: f32,
     range: f32,
-    (wx, wy): (i32, i32),
+    window: (i32, i32),
 ) -> [u8; 9] {
-    let mut win = [0u8; 9];
+    let weight = |q: f32| kernel.get((q * KERNEL_SCALE + 0.5) as usize).copied();
+    window_votes(
+        grid,
+        (cfg, cos_min),
+        rtable,
+        candidates,
+        interior,
+        weight,
+        bin,
+        s,
+        bearing,
+        range,
+        window,
+    )
+}
+
+/// [`vote_window`] with the vote unquantised, `exp(−q)` in f32 (heading known, `K = 1`):
+/// the window argmax at `K = 1` decides between neighbouring cells whose quantised votes
+/// tie when the truth lies near their common edge ([`super::GhtLocalizer::refine_argmax`]).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn vote_window_exact(
+    grid: &GridSpec,
+    (cfg, cos_min): (&LocalizerConfig, f32),
+    rtable: &RTable,
+    candidates: &[u16],
+    interior: &[bool; MAX_LAYER_CELLS],
+    bearing: f32,
+    range: f32,
+    window: (i32, i32),
+) -> [f32; 9] {
+    let weight = |q: f32| Some(exp(-q));
+    window_votes(
+        grid,
+        (cfg, cos_min),
+        rtable,
+        candidates,
+        interior,
+        weight,
+        0,
+        0,
+        bearing,
+        range,
+        window,
+    )
+}
+
+/// The window votes of [`vote_window`] with the kernel `weight(q)` (`None`: no vote); a
+/// window cell keeps its best R-table point's weight.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn window_votes<T: Copy + Default + PartialOrd>(
+    grid: &GridSpec,
+    (cfg, cos_min): (&LocalizerConfig, f32),
+    rtable: &RTable,
+    candidates: &[u16],
+    interior: &[bool; MAX_LAYER_CELLS],
+    weight: impl Fn(f32) -> Option<T>,
+    bin: u8,
+    s: u8,
+    bearing: f32,
+    range: f32,
+    (wx, wy): (i32, i32),
+) -> [T; 9] {
+    let mut win = [T::default(); 9];
     let nx = grid.nx as i32;
     let ny = grid.ny as i32;
     let (cw, ch) = (grid.cell[0], grid.cell[1]);
@@ -152,8 +215,7 @@ pub(super) fn vote_window(
                 let par = dx * ux + dy * uy;
                 let perp = ux * dy - uy * dx;
                 let q = par * par * k_par + perp * perp * k_perp;
-                let k = (q * KERNEL_SCALE + 0.5) as usize;
-                if let Some(&wq) = kernel.get(k) {
+                if let Some(wq) = weight(q) {
                     let w = ((jy - wy + 1) * 3 + (jx - wx + 1)) as usize;
                     if wq > win[w] {
                         win[w] = wq;
