@@ -254,3 +254,5 @@ impl Default for Confidence {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod window_tests;

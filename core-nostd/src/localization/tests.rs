@@ -15,12 +15,12 @@ use std::vec::Vec;
 /// The firmware keeps the localizer in a `static`: this must compile.
 static _IN_PLACE: GhtLocalizer = GhtLocalizer::new_empty();
 
-fn plan(pts: &[(f32, f32)]) -> FloorPlan {
+pub(super) fn plan(pts: &[(f32, f32)]) -> FloorPlan {
     let v: Vec<Vec2> = pts.iter().map(|&(x, y)| v2(x, y)).collect();
     FloorPlan::new(&v).unwrap().centered()
 }
 
-fn l_room() -> FloorPlan {
+pub(super) fn l_room() -> FloorPlan {
     plan(&[(0., 0.), (8., 0.), (8., 3.), (4., 3.), (4., 6.), (0., 6.)])
 }
 
@@ -49,7 +49,7 @@ fn rectangle() -> FloorPlan {
     plan(&[(0., 0.), (9., 0.), (9., 5.), (0., 5.)])
 }
 
-fn boxed(p: &FloorPlan, cfg: &LocalizerConfig) -> Box<GhtLocalizer> {
+pub(super) fn boxed(p: &FloorPlan, cfg: &LocalizerConfig) -> Box<GhtLocalizer> {
     let mut l = Box::new(GhtLocalizer::new_empty());
     l.reset(p, cfg).unwrap();
     l
@@ -57,7 +57,7 @@ fn boxed(p: &FloorPlan, cfg: &LocalizerConfig) -> Box<GhtLocalizer> {
 
 /// Noise-free range at encoder bearing index `k` (54 steps), `None` for a no-return
 /// (incidence beyond 70°).
-fn measure(p: &FloorPlan, truth: &Pose2, k: i32) -> Option<(f32, f32)> {
+pub(super) fn measure(p: &FloorPlan, truth: &Pose2, k: i32) -> Option<(f32, f32)> {
     let beta = k as f32 * TAU / 54.0;
     let hit = p.ray_cast(truth.translation(), unit(truth.theta + beta))?;
     (hit.incidence <= 70f32.to_radians()).then_some((beta, hit.range))
@@ -83,7 +83,7 @@ fn gauss(rng: &mut Pcg32) -> f32 {
     sqrt(-2.0 * ln(u1)) * cos(TAU * u2)
 }
 
-fn uniform(rng: &mut Pcg32) -> f32 {
+pub(super) fn uniform(rng: &mut Pcg32) -> f32 {
     (rng.next_u32() >> 8) as f32 / 16_777_216.0
 }
 
@@ -541,180 +541,6 @@ fn rectangle_keeps_two_modes() {
         );
     }
     assert!(l.coarse_success_within(&truth, 2, 1));
-}
-
-/// Coarse-to-fine argmax: on poses whose heading lies between two tracked headings and
-/// whose position is random, the fine argmax is right at least as often as the coarse one
-/// and strictly more often over the set (noise-free ranges, K = 10). It stays within one
-/// cell and bin of the coarse argmax, and an update forgets it.
-#[test]
-fn fine_argmax_corrects_heading_quantisation() {
-    let p = l_room();
-    let cfg = LocalizerConfig::default();
-    let mut l = boxed(&p, &cfg);
-    let mut rng = Pcg32::seed_from_u64(12);
-    let (mut coarse_right, mut fine_right, mut tried) = (0, 0, 0);
-    while tried < 40 {
-        let a = v2(
-            -3.5 + 7.0 * uniform(&mut rng),
-            -2.5 + 5.0 * uniform(&mut rng),
-        );
-        if !p.contains(a) {
-            continue;
-        }
-        // Midway between two of the four tracked headings of a random bin (9° apart).
-        let bin = (rng.next_u32() % 10) as f32;
-        let theta = bin * 36f32.to_radians();
-        let truth = Pose2::new(a.x, a.y, theta);
-        l.clear();
-        let mut readings: Vec<(f32, f32)> = Vec::new();
-        let mut k = 0;
-        while readings.len() < 8 && k < 54 * 5 {
-            if let Some((b, r)) = measure(&p, &truth, k) {
-                l.update(b, r).unwrap();
-                readings.push((b, r));
-            }
-            k += 7;
-        }
-        if readings.len() < 8 {
-            continue;
-        }
-        tried += 1;
-        let coarse = l.coarse_argmax().unwrap();
-        l.refine_argmax(readings.iter().copied());
-        let fine = l.argmax().unwrap();
-        assert!(l.grid().near(coarse, fine, 1), "{coarse:?} {fine:?}");
-        coarse_right += l.grid().coarse_success(coarse, &truth, 1) as u32;
-        fine_right += l.coarse_success(&truth, 1) as u32;
-        // A further update forgets the fine argmax until it is refined again.
-        l.update(readings[0].0, readings[0].1).unwrap();
-        assert_eq!(l.argmax(), l.coarse_argmax());
-    }
-    assert!(
-        fine_right > coarse_right,
-        "fine {fine_right} vs coarse {coarse_right} of 40"
-    );
-}
-
-/// With the heading known, truths a few millimetres inside a cell's edge: the accumulator's
-/// quantised votes often tie the two cells, and the coarse argmax then takes the first;
-/// the window's unquantised votes take the cell nearer the truth more often.
-#[test]
-fn known_heading_window_argmax_takes_the_cell_near_an_edge() {
-    let p = l_room();
-    let heading = 0.3;
-    let mut l = boxed(&p, &LocalizerConfig::known_heading(heading));
-    let mut rng = Pcg32::seed_from_u64(5);
-    let (mut coarse_right, mut fine_right, mut tried) = (0, 0, 0);
-    while tried < 60 {
-        let g = *l.grid();
-        let (ix, iy) = (rng.next_u32() % g.nx as u32, rng.next_u32() % g.ny as u32);
-        let c = g.cell_centre(ix as usize, iy as usize);
-        // 2 to 10 mm inside one of the cell's four edges, anywhere along it.
-        let inside = 0.002 + 0.008 * uniform(&mut rng);
-        let along = uniform(&mut rng) - 0.5;
-        let side = if rng.next_u32() % 2 == 0 { 1.0 } else { -1.0 };
-        let a = if rng.next_u32() % 2 == 0 {
-            v2(
-                c.x + side * (0.5 * g.cell[0] - inside),
-                c.y + along * g.cell[1],
-            )
-        } else {
-            v2(
-                c.x + along * g.cell[0],
-                c.y + side * (0.5 * g.cell[1] - inside),
-            )
-        };
-        if !p.contains(a) || !p.contains(c) {
-            continue;
-        }
-        let truth = Pose2::new(a.x, a.y, heading);
-        l.clear();
-        let mut readings: Vec<(f32, f32)> = Vec::new();
-        let mut k = 0;
-        while readings.len() < 12 && k < 54 * 5 {
-            if let Some((b, r)) = measure(&p, &truth, k) {
-                l.update(b, r).unwrap();
-                readings.push((b, r));
-            }
-            k += 7;
-        }
-        if readings.len() < 12 {
-            continue;
-        }
-        tried += 1;
-        let coarse = l.coarse_argmax().unwrap();
-        l.refine_argmax(readings.iter().copied());
-        let fine = l.argmax().unwrap();
-        assert!(l.grid().near(coarse, fine, 1), "{coarse:?} {fine:?}");
-        coarse_right += l.grid().coarse_success(coarse, &truth, 1) as u32;
-        fine_right += l.coarse_success(&truth, 1) as u32;
-    }
-    assert!(
-        fine_right > coarse_right,
-        "fine {fine_right} vs coarse {coarse_right} of 60"
-    );
-}
-
-/// The incremental, windowed coarse-to-fine argmax (refined after every reading, as the
-/// pipeline does) picks the same cell as the full re-vote of every reading, at every step,
-/// outliers included.
-#[test]
-fn fine_argmax_is_incremental_and_exact() {
-    fine_argmax_is_incremental_and_exact_for(None);
-}
-
-/// The same with the heading known (`K = 1`, the window's unquantised votes).
-#[test]
-fn known_heading_window_argmax_is_incremental_and_exact() {
-    fine_argmax_is_incremental_and_exact_for(Some(0.3));
-}
-
-/// [`fine_argmax_is_incremental_and_exact`] with `known_heading`: `K = 1` at that heading,
-/// else the default `K = 10` with the truth's heading drawn.
-fn fine_argmax_is_incremental_and_exact_for(known_heading: Option<f32>) {
-    let p = l_room();
-    let cfg = known_heading.map_or(LocalizerConfig::default(), LocalizerConfig::known_heading);
-    let mut l = boxed(&p, &cfg);
-    let mut reference = boxed(&p, &cfg);
-    let mut rng = Pcg32::seed_from_u64(77);
-    let (mut compared, mut episodes) = (0, 0);
-    while episodes < 12 {
-        let a = v2(
-            -3.5 + 7.0 * uniform(&mut rng),
-            -2.5 + 5.0 * uniform(&mut rng),
-        );
-        if !p.contains(a) {
-            continue;
-        }
-        episodes += 1;
-        let heading = known_heading.unwrap_or_else(|| TAU * uniform(&mut rng));
-        let truth = Pose2::new(a.x, a.y, heading);
-        l.clear();
-        reference.clear();
-        let mut readings: Vec<(f32, f32)> = Vec::new();
-        let mut k = 0;
-        while readings.len() < 14 && k < 54 * 5 {
-            if let Some((b, r)) = measure(&p, &truth, k) {
-                // Every fifth reading an outlier.
-                let r = if readings.len() % 5 == 3 { 0.5 * r } else { r };
-                l.update(b, r).unwrap();
-                reference.update(b, r).unwrap();
-                readings.push((b, r));
-                l.refine_argmax(readings.iter().copied());
-                reference.refine_argmax_reference(readings.iter().copied());
-                assert_eq!(
-                    l.argmax(),
-                    reference.argmax(),
-                    "after {} readings",
-                    readings.len()
-                );
-                compared += 1;
-            }
-            k += 11;
-        }
-    }
-    assert!(compared > 100, "{compared}");
 }
 
 /// `grid::mass_near` visits only the rows near its centres; it must add the same cells in
