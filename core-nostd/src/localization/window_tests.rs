@@ -35,26 +35,17 @@ fn fine_argmax_corrects_heading_quantisation() {
         let bin = (rng.next_u32() % 10) as f32;
         let theta = bin * 36f32.to_radians();
         let truth = Pose2::new(a.x, a.y, theta);
-        l.clear();
-        let mut readings: Vec<(f32, f32)> = Vec::new();
-        let mut k = 0;
-        while readings.len() < 8 && k < 54 * 5 {
-            if let Some((b, r)) = measure(&p, &truth, k) {
-                l.update(b, r).unwrap();
-                readings.push((b, r));
-            }
-            k += 7;
-        }
-        if readings.len() < 8 {
+        let Some(Played {
+            readings,
+            coarse_hit,
+            fine_hit,
+        }) = coarse_and_fine(&mut l, &p, &truth, 8)
+        else {
             continue;
-        }
+        };
         tried += 1;
-        let coarse = l.coarse_argmax().unwrap();
-        l.refine_argmax(readings.iter().copied());
-        let fine = l.argmax().unwrap();
-        assert!(l.grid().near(coarse, fine, 1), "{coarse:?} {fine:?}");
-        coarse_right += l.grid().coarse_success(coarse, &truth, 1) as u32;
-        fine_right += l.coarse_success(&truth, 1) as u32;
+        coarse_right += coarse_hit as u32;
+        fine_right += fine_hit as u32;
         // A further update forgets the fine argmax until it is refined again.
         l.update(readings[0].0, readings[0].1).unwrap();
         assert_eq!(l.argmax(), l.coarse_argmax());
@@ -98,26 +89,17 @@ fn known_heading_window_argmax_takes_the_cell_near_an_edge() {
             continue;
         }
         let truth = Pose2::new(a.x, a.y, heading);
-        l.clear();
-        let mut readings: Vec<(f32, f32)> = Vec::new();
-        let mut k = 0;
-        while readings.len() < 12 && k < 54 * 5 {
-            if let Some((b, r)) = measure(&p, &truth, k) {
-                l.update(b, r).unwrap();
-                readings.push((b, r));
-            }
-            k += 7;
-        }
-        if readings.len() < 12 {
+        let Some(Played {
+            coarse_hit,
+            fine_hit,
+            ..
+        }) = coarse_and_fine(&mut l, &p, &truth, 12)
+        else {
             continue;
-        }
+        };
         tried += 1;
-        let coarse = l.coarse_argmax().unwrap();
-        l.refine_argmax(readings.iter().copied());
-        let fine = l.argmax().unwrap();
-        assert!(l.grid().near(coarse, fine, 1), "{coarse:?} {fine:?}");
-        coarse_right += l.grid().coarse_success(coarse, &truth, 1) as u32;
-        fine_right += l.coarse_success(&truth, 1) as u32;
+        coarse_right += coarse_hit as u32;
+        fine_right += fine_hit as u32;
     }
     assert!(
         fine_right > coarse_right,
@@ -184,4 +166,44 @@ fn fine_argmax_is_incremental_and_exact_for(known_heading: Option<f32>) {
         }
     }
     assert!(compared > 100, "{compared}");
+}
+
+/// From a cleared `l`: `n` noise-free readings of `truth` every 7 bearing steps (`None` when
+/// the room returns fewer), then whether the coarse and the fine argmax are a coarse success;
+/// the fine argmax stays within one cell and bin of the coarse one.
+fn coarse_and_fine(
+    l: &mut GhtLocalizer,
+    p: &crate::FloorPlan,
+    truth: &Pose2,
+    n: usize,
+) -> Option<Played> {
+    l.clear();
+    let mut readings: Vec<(f32, f32)> = Vec::new();
+    let mut k = 0;
+    while readings.len() < n && k < 54 * 5 {
+        if let Some((b, r)) = measure(p, truth, k) {
+            l.update(b, r).unwrap();
+            readings.push((b, r));
+        }
+        k += 7;
+    }
+    if readings.len() < n {
+        return None;
+    }
+    let coarse = l.coarse_argmax().unwrap();
+    l.refine_argmax(readings.iter().copied());
+    let fine = l.argmax().unwrap();
+    assert!(l.grid().near(coarse, fine, 1), "{coarse:?} {fine:?}");
+    Some(Played {
+        coarse_hit: l.grid().coarse_success(coarse, truth, 1),
+        fine_hit: l.coarse_success(truth, 1),
+        readings,
+    })
+}
+
+/// The readings [`coarse_and_fine`] played, and whether each argmax was a coarse success.
+struct Played {
+    readings: Vec<(f32, f32)>,
+    coarse_hit: bool,
+    fine_hit: bool,
 }
