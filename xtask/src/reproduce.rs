@@ -155,7 +155,7 @@ pub const STEPS: &[Step] = &[
     Step { runner: Runner::Example("ablation_seeds"), stdout_to: Some("results/ablations/seeds-k10.md"), ..cli("ablation-seeds-k10", "results/ablations", &["10"], 5) },
     Step { runner: Runner::Example("ablation_seeds"), stdout_to: Some("results/ablations/seeds-k10-ppo.md"), ..cli("ablation-seeds-k10-ppo", "results/ablations", &["10", "ppo"], 5) },
     cli("extra", "results/extra", &["eval", "--agents", "heuristic-1,oigm,learnt", "--rot-bins", "1,10", "--plans", "1000", "--extra-measurements", "10", "--max-actions", "300", "--no-progress", "--out", "results/extra"], 500),
-    cli("bench-localization", "results", &["bench-localization", "--plans", "100", "--json", "results/bench-localization.json"], 60),
+    Step { stdout_to: Some("results/bench-localization.md"), ..cli("bench-localization", "results", &["bench-localization", "--plans", "100", "--json", "results/bench-localization.json"], 60) },
     cli("bench-registration", "results", &["bench-registration", "--plans", "1000", "--json", "results/bench-registration.json"], 120),
     cli("inspect-k1", "docs/inspect/k1", &["inspect", "--aggregate", "--agent", "learnt", "--rot-bins", "1", "--plans", "200", "--out", "docs/inspect/k1", "--no-progress"], 5),
     cli("inspect-k10", "docs/inspect/k10", &["inspect", "--aggregate", "--agent", "learnt", "--rot-bins", "10", "--plans", "200", "--out", "docs/inspect/k10", "--no-progress"], 10),
