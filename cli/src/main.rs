@@ -1,10 +1,9 @@
 //! `activesense` — the command-line front end of the simulator, evaluation harness and
 //! instrument driver. Run `activesense --help` for the list of commands. This file is the
 //! clap tree only (commands, their help text, the dispatch); every command's body and its
-//! options live in [`activesense_sim::cli`] (or, for the instrument and inspection commands,
-//! in the library module they drive).
+//! options live in [`activesense::commands`].
 
-use activesense_sim::cli::{self, command_line};
+use activesense::commands::{self as cli, command_line};
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -30,7 +29,7 @@ enum Command {
     /// generated training plans; writes the policy file, its learning curve and logs.
     Train(cli::train::TrainArgs),
     /// Run episodes on the instrument controller (QEMU, serial, TCP or loopback) while the host plays its sensors.
-    Sim(activesense_sim::link::remote::SimArgs),
+    Sim(cli::remote::SimArgs),
     /// Set up a Leica total station in the plan's frame over GeoCOM: drive it with the core
     /// decision chain (policy, localizer, calibrated stop), print the answer and, with
     /// --set-station, write the station and orientation to it (docs/GEOCOM.md).
@@ -39,10 +38,10 @@ enum Command {
     /// injected on request (docs/GEOCOM.md).
     GeocomSim(cli::station::GeocomSimArgs),
     /// Talk to an instrument controller on a serial port.
-    Serial(activesense_sim::link::remote::SerialArgs),
+    Serial(cli::remote::SerialArgs),
     /// Count the firmware's instructions per update and per registration under QEMU
     /// (-icount shift=0); prints a markdown table (see `cargo xtask mcu-bench`).
-    McuBench(activesense_sim::link::mcu_bench::McuBenchArgs),
+    McuBench(cli::mcu_bench::McuBenchArgs),
     /// Summarise a seed range of generated plans (shapes, vertex counts, extents) as a table.
     Dataset(cli::dataset::DatasetArgs),
     /// Evaluate agents on the test plans (the paper's Table 4): writes results.json,
@@ -61,7 +60,7 @@ enum Command {
     /// The inspection tool (paper §3.5): a self-contained web page to step through a
     /// learnt-agent trajectory (episode --agent learnt --json FILE) with a guided
     /// back-propagation overlay, or (--aggregate) the Fig.-4 analysis over many episodes.
-    Inspect(activesense_sim::inspect::InspectArgs),
+    Inspect(cli::inspect::InspectArgs),
     /// How honest the answer's printed precision is (how often the truth lies within 2σ)
     /// and how often answers are ambiguous, over simulated episodes on generated plans or
     /// your rooms (--plans-from).
@@ -70,7 +69,7 @@ enum Command {
     /// calibration plans, fit P(wrong registration) from the belief and the readings, and
     /// write the models the core compiles (core-nostd/src/stop/calibration.rs) with a
     /// held-out check (results/calibration/).
-    Calibrate(activesense_sim::calibrate::CalibrateArgs),
+    Calibrate(cli::calibrate::CalibrateArgs),
 }
 
 #[derive(Subcommand)]
@@ -117,19 +116,19 @@ fn main() -> ExitCode {
         Command::Dataset(a) => cli::dataset::run(a),
         Command::Eval(a) => cli::eval::run(a),
         Command::AnswerCoverage(a) => cli::answer_coverage::run(a),
-        Command::Calibrate(a) => activesense_sim::calibrate::cmd_calibrate(a),
+        Command::Calibrate(a) => cli::calibrate::cmd_calibrate(a),
         Command::BenchRegistration(a) => cli::bench_registration::run(a),
         Command::BenchLocalization(a) => cli::bench_localization::run(a),
         Command::Station(a) => cli::station::run(a),
         Command::GeocomSim(a) => cli::station::run_sim(a),
-        Command::Sim(a) => activesense_sim::link::remote::cmd_sim(a),
-        Command::Serial(a) => activesense_sim::link::remote::cmd_serial(a),
-        Command::McuBench(a) => activesense_sim::link::mcu_bench::cmd_mcu_bench(a),
+        Command::Sim(a) => cli::remote::cmd_sim(a),
+        Command::Serial(a) => cli::remote::cmd_serial(a),
+        Command::McuBench(a) => cli::mcu_bench::cmd_mcu_bench(a),
         Command::Policy(PolicyCommand::Quantize(a)) => cli::policy::quantize(a),
         Command::Policy(PolicyCommand::Agreement(a)) => cli::policy::agreement(a),
         Command::Policy(PolicyCommand::Upload(a)) => cli::policy::upload(a),
         Command::Policy(PolicyCommand::Info(a)) => cli::policy::info(a),
-        Command::Inspect(a) => activesense_sim::inspect::cmd_inspect(a, &command_line()),
+        Command::Inspect(a) => cli::inspect::cmd_inspect(a, &command_line()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

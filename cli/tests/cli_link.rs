@@ -10,13 +10,13 @@
 //!
 //! The CI run is short (`NOISE_EPISODES` episodes, K = 1 and K = 10); the target
 //! (40 episodes, K = 10) runs with `ACTIVESENSE_NOISE_EPISODES=40 ACTIVESENSE_NOISE_ROT_BINS=10
-//! cargo test -p activesense-sim --test cli_link -- --nocapture noisy`.
+//! cargo test -p activesense --test cli_link -- --nocapture noisy`.
 #![cfg(unix)]
 
 mod common;
 
 use activesense_core::device::{ServeEnd, Session};
-use activesense_sim::link::device::{serve_std, HOST_DEVICE};
+use activesense_instrument::link::device::{serve_std, HOST_DEVICE};
 use common::{activesense, s};
 use serialport::{SerialPort, TTYPort};
 use std::io::{Read, Write};

@@ -10,8 +10,8 @@
 use activesense_core::episode::{AgentKind, Termination};
 use activesense_core::policy::BaselineAgent;
 use activesense_core::registration::refine::{refine_with, Search};
-use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
-use activesense_sim::world::plans::TEST_SEEDS;
+use activesense_instrument::episode::{run_episode_observed, EpisodeSpec};
+use activesense_instrument::world::plans::TEST_SEEDS;
 
 #[derive(Default, Debug)]
 struct Tally {

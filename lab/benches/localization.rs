@@ -2,13 +2,13 @@
 //! (grid + interior mask + R-table), GHT update, staging and entropy at 30 × 30 × {1, 10},
 //! and the classical localizer's precomputation and update on the same plan.
 //!
-//! `cargo bench -p activesense-sim --bench localization`
+//! `cargo bench -p activesense-lab --bench localization`
 
 use activesense_core::localization::{GhtLocalizer, LocalizerConfig};
 use activesense_core::world::math::TAU;
-use activesense_sim::baselines::classical::{ClassicalConfig, ClassicalLocalizer};
-use activesense_sim::world::plans;
-use activesense_sim::world::SimWorld;
+use activesense_instrument::world::plans;
+use activesense_instrument::world::SimWorld;
+use activesense_lab::baselines::classical::{ClassicalConfig, ClassicalLocalizer};
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 
 fn measurements(

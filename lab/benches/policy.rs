@@ -4,15 +4,15 @@
 //! of 256 states (both cores), plus a whole simulated heuristic-1 episode for the
 //! environment's cost per step.
 //!
-//! `cargo bench -p activesense-sim --bench policy`
+//! `cargo bench -p activesense-lab --bench policy`
 
 use activesense_core::episode::AgentKind;
 use activesense_core::pipeline::runner::EpisodeRunner;
 use activesense_core::policy::{BELIEF_PLANE, SIDE_FEATURES};
-use activesense_sim::episode::{run_episode, start_episode, EpisodeSpec};
-use activesense_sim::learn::agent::{features, shape_for, LearntAgent};
-use activesense_sim::learn::net::{BatchCache, PolicyNet, Scratch};
-use activesense_sim::world::plans;
+use activesense_instrument::episode::{run_episode, start_episode, EpisodeSpec};
+use activesense_instrument::learn::agent::{features, shape_for, LearntAgent};
+use activesense_instrument::learn::net::{BatchCache, PolicyNet, Scratch};
+use activesense_instrument::world::plans;
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use std::sync::Arc;
 

@@ -2,7 +2,7 @@
 //! mean ± sample standard deviation over the seeds of recognition, pose error, measurements,
 //! rotations and cost.
 //!
-//! `cargo run --release -p activesense-sim --example ablation_seeds -- K [ppo]` reads the
+//! `cargo run --release -p activesense-lab --example ablation_seeds -- K [ppo]` reads the
 //! Table-4 evaluations (learnt agent, 1000 test plans, oracle stop) of every ablated policy:
 //! seed 1 in `results/ablations/k{K}-{what}/`, seeds 2 and 3 in its `seeds/{S}/` (the
 //! `eval-ablation-…` steps of `cargo xtask reproduce`, which also runs this), and the full
@@ -99,7 +99,7 @@ fn main() {
     };
     println!("# The §4.4 ablations at K = {k} over their training seeds ({name})\n");
     println!(
-        "`cargo run --release -p activesense-sim --example ablation_seeds -- {command}`: the learnt \
+        "`cargo run --release -p activesense-lab --example ablation_seeds -- {command}`: the learnt \
          agent on the 1000 test plans (oracle stop), each seed's `results.json`; mean ± sample \
          standard deviation over the seeds.\n"
     );

@@ -11,7 +11,7 @@
 //! uses; the output has no timings, so it regenerates byte for byte).
 //!
 //! ```sh
-//! cargo run --release -p activesense-sim --example refine_budget -- 1000   # plans
+//! cargo run --release -p activesense-lab --example refine_budget -- 1000   # plans
 //! ```
 
 use activesense_core::episode::{AgentKind, Termination};
@@ -19,8 +19,8 @@ use activesense_core::policy::BaselineAgent;
 use activesense_core::registration::pose_distance::PoseDistance;
 use activesense_core::registration::refine::refine_within;
 use activesense_core::registration::refine::Budget;
-use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
-use activesense_sim::world::plans::TEST_SEEDS;
+use activesense_instrument::episode::{run_episode_observed, EpisodeSpec};
+use activesense_instrument::world::plans::TEST_SEEDS;
 use rayon::prelude::*;
 
 /// The budgets compared, by name.
@@ -129,7 +129,7 @@ fn main() {
         .map_or(1000, |a| a.parse().expect("plans: a number"));
     println!("# The end-of-episode refinement under several budgets\n");
     println!(
-        "`cargo run --release -p activesense-sim --example refine_budget -- {plans}`: each agent to its oracle stop on test plans {}..{}, episode seed 0; every budget refines the same final readings. Pose error: mean over recognised episodes (the main job's column). Hypotheses: registrations per refinement (the device's instruction counts for the pipeline's budget are `cargo xtask mcu-bench`'s).\n",
+        "`cargo run --release -p activesense-lab --example refine_budget -- {plans}`: each agent to its oracle stop on test plans {}..{}, episode seed 0; every budget refines the same final readings. Pose error: mean over recognised episodes (the main job's column). Hypotheses: registrations per refinement (the device's instruction counts for the pipeline's budget are `cargo xtask mcu-bench`'s).\n",
         TEST_SEEDS.start,
         TEST_SEEDS.start + plans
     );

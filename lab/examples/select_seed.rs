@@ -2,7 +2,7 @@
 //! seeds are (issue 21: at least three seeds behind every reported configuration, the
 //! committed one picked on validation plans, never on the test plans).
 //!
-//! `cargo run --release -p activesense-sim --example select_seed -- K DIR [VALIDATION_PLANS] [pick]`
+//! `cargo run --release -p activesense-lab --example select_seed -- K DIR [VALIDATION_PLANS] [pick]`
 //! evaluates the learnt agent of every `DIR/seeds/S/policy.policy` (oracle stop, the paper's
 //! protocol) on the first `VALIDATION_PLANS` (default 500) validation plans
 //! ([`VALIDATION_SEEDS`]: drawn neither for training nor for the test) and picks one by the
@@ -22,11 +22,11 @@
 //! fails is no policy), then cost (what the paper and a surveyor pay).
 
 use activesense_core::episode::{AgentKind, EpisodeConfig};
-use activesense_sim::episode::Termination;
-use activesense_sim::eval::harness::{self, EvalOptions};
-use activesense_sim::learn::agent::Policies;
-use activesense_sim::world::plans::{TEST_SEEDS, VALIDATION_SEEDS};
-use activesense_sim::world::sensor::SensorModel;
+use activesense_instrument::episode::Termination;
+use activesense_instrument::learn::agent::Policies;
+use activesense_instrument::world::plans::{TEST_SEEDS, VALIDATION_SEEDS};
+use activesense_instrument::world::sensor::SensorModel;
+use activesense_lab::eval::harness::{self, EvalOptions};
 use std::path::{Path, PathBuf};
 
 /// Recognition within this of the best seed's counts as equal.
@@ -151,7 +151,7 @@ fn main() {
             dir.join("policy.policy").display()
         );
         println!(
-            "`cargo run --release -p activesense-sim --example select_seed -- {k} {} {validation_plans}{}`. \
+            "`cargo run --release -p activesense-lab --example select_seed -- {k} {} {validation_plans}{}`. \
              Learnt agent; validation: plans {}..{} (oracle stop). Committed: **seed {chosen}**, the \
              lowest validation cost among the seeds whose validation recognition is within {:.1} \
              percentage points of the best.\n",

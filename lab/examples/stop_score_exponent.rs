@@ -9,13 +9,13 @@
 //! (`calibrate::threshold_table_by`) and checked on the other, both ways round. Exponent 0 is the estimate itself.
 //!
 //! ```sh
-//! cargo run --release -p activesense-sim -- calibrate --samples-out /tmp/samples.jsonl \
+//! cargo run --release -p activesense -- calibrate --samples-out /tmp/samples.jsonl \
 //!     --rust-out /tmp/calibration.rs --out /tmp/calibration
-//! cargo run --release -p activesense-sim --example stop_score_exponent -- /tmp/samples.jsonl
+//! cargo run --release -p activesense-lab --example stop_score_exponent -- /tmp/samples.jsonl
 //! ```
 
 use activesense_core::stop::{StopModel, STATED_RISKS};
-use activesense_sim::calibrate::{first_crossings, threshold_table_by, EpisodeSamples, Sample};
+use activesense_lab::calibrate::{first_crossings, threshold_table_by, EpisodeSamples, Sample};
 use std::collections::BTreeMap;
 use std::io::BufRead;
 

@@ -11,7 +11,7 @@
 //! instead, the criterion of the oracle-terminated runs.
 //!
 //! ```sh
-//! cargo run --release -p activesense-sim --example stop_trace -- 300 10   # plans, rotation bins
+//! cargo run --release -p activesense-lab --example stop_trace -- 300 10   # plans, rotation bins
 //! ```
 
 use activesense_core::episode::AgentKind;
@@ -20,8 +20,8 @@ use activesense_core::policy::BaselineAgent;
 use activesense_core::registration::pose_distance::{PoseDistance, Tolerance};
 use activesense_core::stop::{stop_score, StopModel};
 use activesense_core::Pose2;
-use activesense_sim::episode::{run_episode_observed, EpisodeSpec};
-use activesense_sim::world::plans::TEST_SEEDS;
+use activesense_instrument::episode::{run_episode_observed, EpisodeSpec};
+use activesense_instrument::world::plans::TEST_SEEDS;
 use rayon::prelude::*;
 
 /// After one reading: readings so far, answer right, argmax right, risk estimate, and

@@ -5,11 +5,11 @@
 //! many answers are underdetermined, how many are ambiguous, and how often the truth is one
 //! of the listed candidates.
 
-use super::{Answer, Determination, HeadingHint};
-use crate::episode::{run_episode, EpisodeSpec, Termination};
-use crate::world::planfile::NamedPlan;
 use activesense_core::episode::AgentKind;
 use activesense_core::registration::pose_distance::{PoseErrors, Tolerance};
+use activesense_instrument::answer::{Answer, Determination, HeadingHint};
+use activesense_instrument::episode::{run_episode, EpisodeSpec, Termination};
+use activesense_instrument::world::planfile::NamedPlan;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -10,13 +10,13 @@ use activesense_core::episode::Termination;
 use activesense_core::episode::{Action, AgentKind};
 use activesense_core::protocol::*;
 use activesense_core::world::floorplan::PlanError;
-use activesense_sim::episode::{EndReason, EpisodeSpec, Trajectory};
-use activesense_sim::learn::agent::{run_agent_episode, Int8Policy, Policies};
-use activesense_sim::link::device::sim_episode;
-use activesense_sim::link::error::LinkError;
-use activesense_sim::link::remote::{reference_run, same_run};
-use activesense_sim::link::serial::Client;
-use activesense_sim::world::plans::TEST_SEEDS;
+use activesense_instrument::episode::{EndReason, EpisodeSpec, Trajectory};
+use activesense_instrument::learn::agent::{run_agent_episode, Int8Policy, Policies};
+use activesense_instrument::link::device::sim_episode;
+use activesense_instrument::link::error::LinkError;
+use activesense_instrument::link::runner::{reference_run, same_run};
+use activesense_instrument::link::serial::Client;
+use activesense_instrument::world::plans::TEST_SEEDS;
 use std::io::{Read, Write};
 use std::path::PathBuf;
 
@@ -388,10 +388,10 @@ pub fn firmware_elf() -> PathBuf {
         .status()
         .expect("run cargo to build the firmware");
     assert!(status.success(), "building the firmware failed");
-    root.join(activesense_sim::link::serial::DEFAULT_ELF)
+    root.join(activesense_instrument::link::serial::DEFAULT_ELF)
 }
 
-/// The `activesense` CLI binary, built here with `cargo build -p activesense-sim --bin
+/// The `activesense` CLI binary, built here with `cargo build -p activesense --bin
 /// activesense` (a no-op when up to date): the tests that need a *second process* (the
 /// device must keep serving between commands) run it.
 pub fn activesense_bin() -> PathBuf {
@@ -399,7 +399,7 @@ pub fn activesense_bin() -> PathBuf {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = std::process::Command::new(cargo)
         .current_dir(&root)
-        .args(["build", "-p", "activesense-sim", "--bin", "activesense"])
+        .args(["build", "-p", "activesense", "--bin", "activesense"])
         .status()
         .expect("run cargo to build the CLI");
     assert!(status.success(), "building the CLI failed");
@@ -432,8 +432,8 @@ fn learnt_episode_matches<T: Read + Write>(client: &mut Client<T>, seed_index: u
 
 /// A K = 1 int8 blob different from the built-in one: a random network, quantised.
 pub fn other_k1_blob() -> Vec<u8> {
-    let net = activesense_sim::learn::quantize::random_net(1, 77);
-    activesense_sim::learn::quantize::quantize_calibrated(&net, 3, 5).0
+    let net = activesense_lab::learn::quantize::random_net(1, 77);
+    activesense_lab::learn::quantize::quantize_calibrated(&net, 3, 5).0
 }
 
 /// The policy upload: a good blob replaces the built-in K = 1 policy and serves (episodes

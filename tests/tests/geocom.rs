@@ -3,20 +3,20 @@
 //! fixtures and on generated plans; every injected fault class ends in a recovery or a
 //! one-line message naming the fault and the RPC, with the instrument left still.
 
+use activesense::commands::station::{station, GeoComLink, StationArgs, StationReport};
 use activesense_core::episode::{AgentKind, EpisodeConfig};
-use activesense_sim::cli::station::{station, GeoComLink, StationArgs, StationReport};
-use activesense_sim::episode::EpisodeSpec;
-use activesense_sim::geocom::instrument::reference_session;
-use activesense_sim::geocom::sim::{serve_tcp, FaultSpec, GeoComSim, SimConfig, SimState};
-use activesense_sim::learn::agent::Policies;
-use activesense_sim::world::planfile::{self, LoadOptions, PlanReadArgs};
-use activesense_sim::world::plans;
+use activesense_instrument::episode::EpisodeSpec;
+use activesense_instrument::geocom::instrument::reference_session;
+use activesense_instrument::geocom::sim::{serve_tcp, FaultSpec, GeoComSim, SimConfig, SimState};
+use activesense_instrument::learn::agent::Policies;
+use activesense_instrument::world::planfile::{self, LoadOptions, PlanReadArgs};
+use activesense_instrument::world::plans;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../host-sim/tests/fixtures/plans")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../cli/tests/fixtures/plans")
 }
 
 fn args(link: GeoComLink, plan: &Path, room: Option<String>, agent: AgentKind) -> StationArgs {
@@ -80,7 +80,7 @@ fn start_tcp(cfg: SimConfig) -> (GeoComLink, Arc<Mutex<SimState>>) {
 
 /// The in-process episode's report for the session `a` describes.
 fn reference(a: &StationArgs) -> StationReport {
-    let (name, setup, policies) = activesense_sim::cli::station::setup_of(a).unwrap();
+    let (name, setup, policies) = activesense::commands::station::setup_of(a).unwrap();
     let cfg = sim_config(a, vec![]);
     let o = reference_session(&setup, &policies, cfg.world_seed).unwrap();
     StationReport::new(&name, None, &o)
@@ -191,7 +191,7 @@ fn pty_answers_are_bit_identical() {
         let mut a = args(dummy(), &file, room, AgentKind::Heuristic1);
         let want = reference(&a);
         let sim = GeoComSim::new(sim_config(&a, vec![]));
-        let (path, _state) = activesense_sim::geocom::sim::serve_pty(sim).unwrap();
+        let (path, _state) = activesense_instrument::geocom::sim::serve_pty(sim).unwrap();
         a.link = format!("geocom:serial:{path}:115200").parse().unwrap();
         let mut got = station(&a).unwrap();
         got.instrument = None;
@@ -334,7 +334,7 @@ fn set_station_writes_the_pose_and_orientation() {
     assert_eq!(got.symmetry_order, 1);
     let [x, y, _] = got.pose.unwrap();
     // Written in the plan's own coordinates (metres), not the centred model frame.
-    let frame = activesense_sim::world::planfile::load_plan(&file, &Default::default())
+    let frame = activesense_instrument::world::planfile::load_plan(&file, &Default::default())
         .unwrap()
         .plan
         .frame;

@@ -2,7 +2,7 @@
 //! USART1 on a local TCP socket. The ELF is built by [`firmware_elf`] (cargo, thumb target,
 //! `firmware` profile) unless `ACTIVESENSE_FIRMWARE_ELF` names one.
 
-use activesense_sim::link::serial::{self, LinkSpec};
+use activesense_instrument::link::serial::{self, LinkSpec};
 use activesense_tests::{
     check_episodes, check_episodes_with, confident_stop, fault_suite, firmware_elf,
 };
@@ -52,8 +52,8 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
 /// firmware's RAM), and only `--shutdown` powers it off (exit status 0).
 #[test]
 fn qemu_policy_upload_then_info_in_a_second_process() {
-    use activesense_sim::link::device::qemu_binary;
-    use activesense_sim::link::qemu_cmd::{qemu_command, QemuSerial};
+    use activesense_instrument::link::device::qemu_binary;
+    use activesense_instrument::link::qemu_cmd::{qemu_command, QemuSerial};
     use std::process::{Command, Stdio};
     let elf = firmware_elf();
     let cli = activesense_tests::activesense_bin();
@@ -140,8 +140,8 @@ fn qemu_policy_upload_then_info_in_a_second_process() {
 /// work is ordered as it must be (rotation < K = 1 vote < K = 10 vote).
 #[test]
 fn qemu_instruction_counts_reproducible() {
-    use activesense_sim::link::mcu_bench::{mcu_bench, McuBenchArgs};
-    use activesense_sim::world::plans::TEST_SEEDS;
+    use activesense::commands::mcu_bench::{mcu_bench, McuBenchArgs};
+    use activesense_instrument::world::plans::TEST_SEEDS;
     let args = McuBenchArgs {
         elf: firmware_elf(),
         episodes: 2,
@@ -181,7 +181,7 @@ fn qemu_instruction_counts_reproducible() {
 /// random layers, the built-in K = 1 and K = 10 policies) and exits 1 on any difference.
 #[test]
 fn qemu_dsp_kernels_equal_the_reference() {
-    use activesense_sim::link::qemu_cmd::{qemu_command, QemuSerial};
+    use activesense_instrument::link::qemu_cmd::{qemu_command, QemuSerial};
     use std::process::Stdio;
     use std::time::Instant;
     let elf = firmware_elf();

@@ -15,7 +15,7 @@
 
 mod fuzz;
 // The emulator's command line, shared with the host's `qemu` link (why by path: see the file).
-#[path = "../../host-sim/src/link/qemu_cmd.rs"]
+#[path = "../../instrument/src/link/qemu_cmd.rs"]
 #[allow(dead_code)] // xtask boots with USART1 on null only
 mod qemu_cmd;
 mod qemu_log;
@@ -99,7 +99,7 @@ fn cargo() -> Command {
     c
 }
 
-/// `cargo run --quiet -p activesense-sim --bin activesense --`: the host CLI, for tasks that
+/// `cargo run --quiet -p activesense --bin activesense --`: the host CLI, for tasks that
 /// drive the firmware through it.
 pub fn activesense_cli() -> Command {
     let mut c = cargo();
@@ -107,7 +107,7 @@ pub fn activesense_cli() -> Command {
         "run",
         "--quiet",
         "-p",
-        "activesense-sim",
+        "activesense",
         "--bin",
         "activesense",
         "--",
@@ -148,7 +148,7 @@ fn setup() -> Result<()> {
         run(Command::new("rustup").args(["target", "add", TARGET]))?;
     }
     // qemu-system-arm runs the firmware; chromium runs the inspection page's browser test
-    // (host-sim/tests/inspect_browser.rs). Both from the distribution's packages.
+    // (cli/tests/inspect_browser.rs). Both from the distribution's packages.
     let missing: Vec<&str> = [
         ("qemu-system-arm", "qemu-system-arm"),
         ("chromium", "chromium"),

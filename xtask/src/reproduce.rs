@@ -29,7 +29,7 @@ use std::time::Instant;
 pub enum Runner {
     /// The release `activesense` binary with these arguments.
     Cli,
-    /// `cargo run --release -p activesense-sim --example NAME -- ARGS`, stdout into the file.
+    /// `cargo run --release -p activesense-lab --example NAME -- ARGS`, stdout into the file.
     Example(&'static str),
     /// `cargo xtask ARGS`, stdout into the file.
     Xtask,
@@ -188,9 +188,9 @@ fn git(args: &[&str]) -> String {
 pub fn command_line(s: &Step) -> String {
     let args = s.args.join(" ");
     match s.runner {
-        Runner::Cli => format!("cargo run --release -p activesense-sim -- {args}"),
+        Runner::Cli => format!("cargo run --release -p activesense -- {args}"),
         Runner::Example(e) => format!(
-            "cargo run --release -p activesense-sim --example {e} -- {args} > {}",
+            "cargo run --release -p activesense-lab --example {e} -- {args} > {}",
             s.stdout_to.unwrap_or("-")
         ),
         Runner::Xtask => format!("cargo xtask {args} > {}", s.stdout_to.unwrap_or("-")),
@@ -242,7 +242,7 @@ fn release_binary() -> Result<PathBuf> {
         "build",
         "--release",
         "-p",
-        "activesense-sim",
+        "activesense",
         "--bin",
         "activesense",
     ]))?;
@@ -263,7 +263,7 @@ fn run_step(s: &Step, bin: &Path) -> Result<()> {
                 "--quiet",
                 "--release",
                 "-p",
-                "activesense-sim",
+                "activesense-lab",
                 "--example",
                 e,
                 "--",

@@ -1,12 +1,12 @@
 //! `activesense answer-coverage`: how honest the answer's printed precision is, and how
-//! often answers are ambiguous ([`crate::answer::coverage`]), on generated plans or the
+//! often answers are ambiguous ([`activesense_lab::coverage`]), on generated plans or the
 //! user's rooms; prints one markdown row per rotation setting.
 
-use crate::answer::coverage::{coverage, CoverageReport, CoverageRun};
-use crate::episode::{parse_agent, parse_termination, Termination};
-use crate::world::planfile::{self, PlanReadArgs};
-use crate::world::plans::{TEST_SEEDS, TRAIN_SEEDS};
 use activesense_core::episode::AgentKind;
+use activesense_instrument::episode::{parse_agent, parse_termination, Termination};
+use activesense_instrument::world::planfile::{self, PlanReadArgs};
+use activesense_instrument::world::plans::{TEST_SEEDS, TRAIN_SEEDS};
+use activesense_lab::coverage::{coverage, CoverageReport, CoverageRun};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;

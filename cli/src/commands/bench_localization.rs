@@ -25,7 +25,7 @@ pub struct BenchLocalizationArgs {
 }
 
 pub fn run(a: BenchLocalizationArgs) -> Result<()> {
-    use crate::bench::localization::{self as bl, BenchOptions};
+    use activesense_lab::bench::localization::{self as bl, BenchOptions};
     let mut opts = BenchOptions {
         plans: a.plans,
         trials_per_plan: a.trials,

@@ -28,7 +28,7 @@ pub struct BenchRegistrationArgs {
 }
 
 pub fn run(a: BenchRegistrationArgs) -> Result<()> {
-    use crate::bench::registration as bench;
+    use activesense_lab::bench::registration as bench;
     let opts = bench::BenchOptions {
         plans: a.plans,
         measurements: a.measurements,

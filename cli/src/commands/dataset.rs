@@ -1,7 +1,7 @@
 //! `activesense dataset`: summarise a seed range of generated plans (shapes, vertex counts,
 //! extents) as a markdown table.
 
-use crate::world::plans;
+use activesense_instrument::world::plans;
 use anyhow::Result;
 use clap::Args;
 

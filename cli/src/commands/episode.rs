@@ -2,16 +2,16 @@
 //! print its step log and outcome; optionally write the trajectory as JSON and an SVG.
 
 use super::{write_file, SensorArgs};
-use crate::answer::{parse_heading_hint, Answer, HeadingHint};
-use crate::episode::{
+use activesense_core::episode::AgentKind;
+use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
+use activesense_instrument::answer::{parse_heading_hint, Answer, HeadingHint};
+use activesense_instrument::episode::{
     parse_agent, parse_observability, parse_stop_risk, scan_string, termination_parser,
     EpisodeSpec, Trajectory,
 };
-use crate::learn::agent::{run_agent_episode, Policies};
-use crate::plot::svg::{self, Scene};
-use crate::world::planfile::{self, PlanReadArgs};
-use activesense_core::episode::AgentKind;
-use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
+use activesense_instrument::learn::agent::{run_agent_episode, Policies};
+use activesense_instrument::plot::svg::{self, Scene};
+use activesense_instrument::world::planfile::{self, PlanReadArgs};
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -65,7 +65,7 @@ pub struct EpisodeArgs {
     /// When to stop: on coarse success against the ground truth (paper), by the calibrated
     /// stop (no ground truth; answers with the refined pose), or only at the action limit.
     #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
-    termination: crate::episode::Termination,
+    termination: activesense_instrument::episode::Termination,
     /// Write the full trajectory as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -144,7 +144,9 @@ fn play(a: &EpisodeArgs, spec: &EpisodeSpec) -> Result<(Policies, Trajectory)> {
     }
     // The learnt float policy's episodes carry the inspection data (`activesense inspect`).
     let t = match policies.for_rot_bins(spec.rot_bins) {
-        Some(p) if spec.agent == AgentKind::Learnt => crate::inspect::record_episode(spec, p),
+        Some(p) if spec.agent == AgentKind::Learnt => {
+            activesense_lab::inspect::record_episode(spec, p)
+        }
         _ => run_agent_episode(spec, &policies)?,
     };
     Ok((policies, t))
@@ -216,8 +218,9 @@ fn print_outcome(t: &Trajectory) {
         )
     };
     // Under the calibrated stop the answer is the refined pose, scored by its cell.
-    let answer_is_refined =
-        t.spec.termination == crate::episode::Termination::Confident && o.refined.is_some();
+    let answer_is_refined = t.spec.termination
+        == activesense_instrument::episode::Termination::Confident
+        && o.refined.is_some();
     println!(
         "recognised: {} (room symmetry C{}{})",
         if o.recognised { "yes" } else { "no" },

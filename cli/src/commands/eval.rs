@@ -3,14 +3,14 @@
 //! `--extra-measurements`, the pose error past the minimal set.
 
 use super::{command_line, SensorArgs};
-use crate::episode::{
-    parse_agent, parse_observability, parse_stop_risk, parse_tolerance, termination_parser,
-};
-use crate::learn::agent::Policies;
-use crate::world::planfile::{self, PlanReadArgs};
-use crate::world::plans;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::{EpisodeConfig, EVAL_MAX_ACTIONS};
+use activesense_instrument::episode::{
+    parse_agent, parse_observability, parse_stop_risk, parse_tolerance, termination_parser,
+};
+use activesense_instrument::learn::agent::Policies;
+use activesense_instrument::world::planfile::{self, PlanReadArgs};
+use activesense_instrument::world::plans;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -59,7 +59,7 @@ pub struct EvalArgs {
     /// calibrated stop (no ground truth; it answers with the refined pose, and recognition
     /// scores the cell that pose lies in), or only the action limit.
     #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
-    termination: crate::episode::Termination,
+    termination: activesense_instrument::episode::Termination,
     #[command(flatten)]
     sensor: SensorArgs,
     /// Worker threads (default: all cores).
@@ -132,7 +132,7 @@ fn parse_agents(s: &str) -> Result<AgentList, String> {
 }
 
 pub fn run(a: EvalArgs) -> Result<()> {
-    use crate::eval::{experiments, harness, report};
+    use activesense_lab::eval::{experiments, harness, report};
     use std::io::IsTerminal;
     if let Some(bad) = a.rot_bins.iter().find(|k| **k != 1 && **k != 10) {
         bail!("--rot-bins takes 1 and/or 10 (the paper's two settings), got {bad}");
@@ -189,18 +189,18 @@ pub fn run(a: EvalArgs) -> Result<()> {
         .collect();
     let command = command_line();
     if !a.stop_risks.is_empty() {
-        if opts.termination != crate::episode::Termination::Confident {
+        if opts.termination != activesense_instrument::episode::Termination::Confident {
             bail!("--stop-risks sweeps the calibrated stop: give --termination confident");
         }
         let t0 = std::time::Instant::now();
-        let f = crate::eval::frontier::run(&opts, &a.stop_risks);
-        let md = crate::eval::frontier::markdown(&f, &command);
+        let f = activesense_lab::eval::frontier::run(&opts, &a.stop_risks);
+        let md = activesense_lab::eval::frontier::markdown(&f, &command);
         return write_analysis(
             &a.out,
             [
                 ("frontier.json", serde_json::to_string_pretty(&f)? + "\n"),
                 ("frontier.md", md.clone()),
-                ("frontier.svg", crate::eval::frontier::svg(&f)),
+                ("frontier.svg", activesense_lab::eval::frontier::svg(&f)),
             ],
             &md,
             t0,
@@ -237,9 +237,11 @@ pub fn run(a: EvalArgs) -> Result<()> {
     let (report, timing) = harness::run(&opts);
     let files = report::write_outputs(&report, &timing, &a.out, &command)?;
     print_summary(&report, &timing, &files);
-    if a.with_no_oracle && opts.termination != crate::episode::Termination::Confident {
+    if a.with_no_oracle
+        && opts.termination != activesense_instrument::episode::Termination::Confident
+    {
         let mut no_oracle = opts.clone();
-        no_oracle.termination = crate::episode::Termination::Confident;
+        no_oracle.termination = activesense_instrument::episode::Termination::Confident;
         // The pose-error curve registers after every measurement: it is the oracle run's.
         no_oracle.curve_plans = 0;
         let dir = a.out.join("no-oracle");
@@ -276,8 +278,8 @@ fn write_analysis(
 
 /// The terminal summary of one evaluation: a line per group, the wall time, the files.
 fn print_summary(
-    report: &crate::eval::harness::EvalReport,
-    timing: &crate::eval::harness::Timing,
+    report: &activesense_lab::eval::harness::EvalReport,
+    timing: &activesense_lab::eval::harness::Timing,
     files: &[PathBuf],
 ) {
     println!(

@@ -5,13 +5,13 @@
 //! runner it drives.
 
 use super::remote::{spec_for, RemoteEpisodeArgs};
-use crate::episode::{parse_agent, termination_parser};
-use crate::link::device::sim_episode;
-use crate::link::runner::run_one;
-use crate::link::serial::{self, LinkSpec};
-use crate::world::plans::TEST_SEEDS;
 use activesense_core::episode::{AgentKind, EVAL_MAX_ACTIONS};
 use activesense_core::protocol::UpdateStats;
+use activesense_instrument::episode::{parse_agent, termination_parser};
+use activesense_instrument::link::device::sim_episode;
+use activesense_instrument::link::runner::run_one;
+use activesense_instrument::link::serial::{self, LinkSpec};
+use activesense_instrument::world::plans::TEST_SEEDS;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::PathBuf;

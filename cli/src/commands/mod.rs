@@ -6,15 +6,19 @@
 pub mod answer_coverage;
 pub mod bench_localization;
 pub mod bench_registration;
+pub mod calibrate;
 pub mod dataset;
 pub mod episode;
 pub mod eval;
+pub mod inspect;
+pub mod mcu_bench;
 pub mod plan;
 pub mod policy;
+pub mod remote;
 pub mod station;
 pub mod train;
 
-use crate::world::sensor::SensorModel;
+use activesense_instrument::world::sensor::SensorModel;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::Path;

@@ -2,13 +2,13 @@
 //! and agent placement, and optionally write it as JSON and SVG.
 
 use super::write_file;
-use crate::episode::EpisodeSpec;
-use crate::plot::svg::{self, Scene};
-use crate::world::placement;
-use crate::world::plans::{self, Family};
-use crate::world::sensor::SensorModel;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
+use activesense_instrument::episode::EpisodeSpec;
+use activesense_instrument::plot::svg::{self, Scene};
+use activesense_instrument::world::placement;
+use activesense_instrument::world::plans::{self, Family};
+use activesense_instrument::world::sensor::SensorModel;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -52,7 +52,7 @@ pub fn run(a: PlanArgs) -> Result<()> {
         "visual centre ({:.3}, {:.3}), placement radius {:.3} m",
         p.visual_centre[0], p.visual_centre[1], p.radius
     );
-    let world = crate::world::SimWorld::new(
+    let world = activesense_instrument::world::SimWorld::new(
         g.plan.clone(),
         SensorModel::default(),
         EpisodeConfig::default(),

@@ -3,9 +3,9 @@
 //! instrument, uploading an int8 policy (`upload`) and asking which one serves (`info`).
 
 use super::write_file;
-use crate::learn::agent::Policies;
-use crate::link::runner::open_link;
-use crate::link::serial::{self, LinkSpec};
+use activesense_instrument::learn::agent::Policies;
+use activesense_instrument::link::runner::open_link;
+use activesense_instrument::link::serial::{self, LinkSpec};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
@@ -19,7 +19,7 @@ pub struct QuantizeArgs {
     #[arg(long)]
     out: PathBuf,
     /// Greedy episodes on training plans whose states calibrate the activation ranges.
-    #[arg(long, default_value_t = crate::learn::quantize::DEFAULT_CALIBRATION_EPISODES)]
+    #[arg(long, default_value_t = activesense_lab::learn::quantize::DEFAULT_CALIBRATION_EPISODES)]
     calibration_episodes: usize,
     /// Seed of the calibration plans and placements.
     #[arg(long, default_value_t = 1)]
@@ -42,7 +42,7 @@ pub struct AgreementArgs {
     #[arg(long)]
     int8: Vec<PathBuf>,
     /// Calibration episodes when quantising on the fly.
-    #[arg(long, default_value_t = crate::learn::quantize::DEFAULT_CALIBRATION_EPISODES)]
+    #[arg(long, default_value_t = activesense_lab::learn::quantize::DEFAULT_CALIBRATION_EPISODES)]
     calibration_episodes: usize,
     /// Calibration seed when quantising on the fly.
     #[arg(long, default_value_t = 1)]
@@ -53,10 +53,11 @@ pub struct AgreementArgs {
 }
 
 pub fn quantize(a: QuantizeArgs) -> Result<()> {
-    use crate::learn::{file, quantize};
+    use activesense_instrument::learn::file;
+    use activesense_lab::learn::quantize;
     let (net, meta) = file::load(&a.policy).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let mask = crate::learn::agent::InputMask::of_metadata(&meta);
-    if mask != crate::learn::agent::InputMask::Full {
+    let mask = activesense_instrument::learn::agent::InputMask::of_metadata(&meta);
+    if mask != activesense_instrument::learn::agent::InputMask::Full {
         bail!(
             "{} is an ablation trained on '{}' inputs; the instrument's int8 policy shows the network every input, so only full-input policies can be quantised",
             a.policy.display(),
@@ -88,7 +89,7 @@ fn read_blob(path: &Path) -> Result<(u8, Vec<u8>)> {
 }
 
 pub fn agreement(a: AgreementArgs) -> Result<()> {
-    use crate::learn::quantize;
+    use activesense_lab::learn::quantize;
     let mut rot_bins = a.rot_bins.clone();
     rot_bins.dedup();
     let policies = Policies::load(&a.policy, &rot_bins)?;

@@ -8,22 +8,22 @@
 //! additionally replays each episode in-process ([`activesense_core::device::instrument::run_local`])
 //! and fails unless actions, observations and report are bit-identical.
 
-use crate::episode::{
-    parse_agent, parse_observability, parse_stop_risk, termination_parser, EpisodeSpec,
-};
-use crate::link::device::{sim_episode, SimInstrument};
-use crate::link::runner::{end_session, open_link, print_link_counters};
-pub use crate::link::runner::{
-    reference_run, restartable, run_one, same_run, EpisodeMaker, MAX_RESTARTS,
-};
-use crate::link::serial::{self, EpisodeRun, LinkSpec};
-use crate::world::plans::TEST_SEEDS;
-use crate::world::sensor::SensorModel;
-use crate::world::SimWorld;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_core::protocol::{EpisodeParams, EpisodeReport, UpdateStats};
 use activesense_core::FloorPlan;
+use activesense_instrument::episode::{
+    parse_agent, parse_observability, parse_stop_risk, termination_parser, EpisodeSpec,
+};
+use activesense_instrument::link::device::{sim_episode, SimInstrument};
+use activesense_instrument::link::runner::{end_session, open_link, print_link_counters};
+pub use activesense_instrument::link::runner::{
+    reference_run, restartable, run_one, same_run, EpisodeMaker, MAX_RESTARTS,
+};
+use activesense_instrument::link::serial::{self, EpisodeRun, LinkSpec};
+use activesense_instrument::world::plans::TEST_SEEDS;
+use activesense_instrument::world::sensor::SensorModel;
+use activesense_instrument::world::SimWorld;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
@@ -76,8 +76,8 @@ pub struct RemoteEpisodeArgs {
     pub shutdown: bool,
     /// An approximate heading, DEG±TOL (degrees counter-clockwise from the plan's +x axis):
     /// breaks the tie between the poses a symmetric room leaves (see `episode --help`).
-    #[arg(long, value_parser = crate::answer::parse_heading_hint, allow_hyphen_values = true)]
-    pub heading_hint: Option<crate::answer::HeadingHint>,
+    #[arg(long, value_parser = activesense_instrument::answer::parse_heading_hint, allow_hyphen_values = true)]
+    pub heading_hint: Option<activesense_instrument::answer::HeadingHint>,
 }
 
 /// `activesense sim`.
@@ -107,7 +107,7 @@ pub struct SimArgs {
     #[arg(long, num_args = 1..)]
     pub plans_from: Vec<PathBuf>,
     #[command(flatten)]
-    pub read: crate::world::planfile::PlanReadArgs,
+    pub read: activesense_instrument::world::planfile::PlanReadArgs,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -160,7 +160,7 @@ pub struct SerialRunArgs {
     #[arg(long)]
     pub plan: PathBuf,
     #[command(flatten)]
-    pub read: crate::world::planfile::PlanReadArgs,
+    pub read: activesense_instrument::world::planfile::PlanReadArgs,
     #[command(flatten)]
     pub episode: RemoteEpisodeArgs,
 }
@@ -173,7 +173,7 @@ pub(super) fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeS
         bail!(
             "{} is a host-side benchmark (paper §4.3): OIGM needs the ground truth and EEM ray-casts {} belief hypotheses per bearing, so the instrument does not run them; use `activesense episode` or `activesense eval --agents {}`",
             a.agent.name(),
-            crate::baselines::greedy::EEM_PARTICLES,
+            activesense_instrument::baselines::greedy::EEM_PARTICLES,
             a.agent.name()
         );
     }
@@ -296,17 +296,17 @@ fn print_run(
     t.cost += r.cost as f64;
 }
 
-/// The episode's answer ([`crate::answer::Answer`]) in the plan's coordinates, indented
+/// The episode's answer ([`activesense_instrument::answer::Answer`]) in the plan's coordinates, indented
 /// under its report line.
 fn print_answer(
     label: &str,
     run: &EpisodeRun,
     plan: &FloorPlan,
-    frame: &crate::world::planfile::PlanFrame,
+    frame: &activesense_instrument::world::planfile::PlanFrame,
     params: &EpisodeParams,
     a: &RemoteEpisodeArgs,
 ) {
-    let answer = crate::answer::Answer::of_report(
+    let answer = activesense_instrument::answer::Answer::of_report(
         label.to_string(),
         plan,
         frame,
@@ -354,8 +354,11 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
     );
     let start = Instant::now();
     let mut t = Totals::default();
-    let rooms =
-        crate::world::planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
+    let rooms = activesense_instrument::world::planfile::rooms_for_command(
+        a.plan.as_deref(),
+        &a.plans_from,
+        &a.read,
+    )?;
     // Generated plans: one episode per plan seed. The user's rooms: `--episodes` episodes in
     // each, episode seeds episode-seed, episode-seed + 1, ...
     let specs: Vec<(String, EpisodeSpec)> = match &rooms {
@@ -432,11 +435,11 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
     Ok(())
 }
 
-/// Reads a plan file (our JSON, GeoJSON or DXF, metres; [`crate::world::planfile`]) into a
+/// Reads a plan file (our JSON, GeoJSON or DXF, metres; [`activesense_instrument::world::planfile`]) into a
 /// model-frame plan.
 pub fn read_plan_file(path: &std::path::Path) -> Result<FloorPlan> {
     Ok(
-        crate::world::planfile::load_plan(path, &Default::default())?
+        activesense_instrument::world::planfile::load_plan(path, &Default::default())?
             .plan
             .plan,
     )
@@ -456,7 +459,8 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             Ok(())
         }
         SerialCommand::Run(r) => {
-            let loaded = crate::world::planfile::load_plan(&r.plan, &r.read.options())?;
+            let loaded =
+                activesense_instrument::world::planfile::load_plan(&r.plan, &r.read.options())?;
             for w in &loaded.warnings {
                 eprintln!("warning: {}: {w}", loaded.plan.name);
             }

@@ -3,23 +3,23 @@
 //! `docs/GEOCOM.md` describes the protocol, the RPCs and the fault handling.
 
 use super::SensorArgs;
-use crate::answer::{Answer, AnswerInput, HeadingHint};
-use crate::episode::{parse_agent, parse_stop_risk, EpisodeSpec};
-use crate::geocom::client::{
-    Client, ClientConfig, SerialTransport, TcpTransport, Transport, DEFAULT_BAUD,
-};
-use crate::geocom::instrument::{
-    run_session, with_policy, GeoComInstrument, InstrumentInfo, SessionError, SessionOutcome,
-    SessionSetup, SessionStep, ROT_BINS,
-};
-use crate::geocom::rpc;
-use crate::geocom::sim::{FaultSpec, GeoComSim, SimConfig};
-use crate::learn::agent::Policies;
-use crate::world::planfile::{self, PlanFrame, PlanReadArgs};
 use activesense_core::episode::{Action, AgentKind, EpisodeConfig};
 use activesense_core::episode::{DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_core::pipeline::Stop;
 use activesense_core::registration::Measurement;
+use activesense_instrument::answer::{Answer, AnswerInput, HeadingHint};
+use activesense_instrument::episode::{parse_agent, parse_stop_risk, EpisodeSpec};
+use activesense_instrument::geocom::client::{
+    Client, ClientConfig, SerialTransport, TcpTransport, Transport, DEFAULT_BAUD,
+};
+use activesense_instrument::geocom::instrument::{
+    run_session, with_policy, GeoComInstrument, InstrumentInfo, SessionError, SessionOutcome,
+    SessionSetup, SessionStep, ROT_BINS,
+};
+use activesense_instrument::geocom::rpc;
+use activesense_instrument::geocom::sim::{FaultSpec, GeoComSim, SimConfig};
+use activesense_instrument::learn::agent::Policies;
+use activesense_instrument::world::planfile::{self, PlanFrame, PlanReadArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::Serialize;
@@ -147,7 +147,7 @@ pub struct StationArgs {
     pub quiet: bool,
     /// An approximate heading, DEG±TOL (degrees counter-clockwise from the plan's +x axis, the
     /// direction of encoder bearing 0): narrows a symmetric room's candidates in the answer.
-    #[arg(long, value_parser = crate::answer::parse_heading_hint, allow_hyphen_values = true)]
+    #[arg(long, value_parser = activesense_instrument::answer::parse_heading_hint, allow_hyphen_values = true)]
     pub heading_hint: Option<HeadingHint>,
 }
 
@@ -275,7 +275,7 @@ impl StationReport {
         }
         let [x, y, t] = cands[k];
         let az = (FRAC_PI_2 - (t + self.final_bearing as f64)).rem_euclid(TAU);
-        let e = |e: crate::geocom::client::GeoComError| {
+        let e = |e: activesense_instrument::geocom::client::GeoComError| {
             anyhow::anyhow!("writing the station failed: {e}")
         };
         rpc::do_measure(client, rpc::tmc_prog::CLEAR).map_err(e)?;
@@ -452,7 +452,7 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
     Ok(report)
 }
 
-fn still_note(errs: &[crate::geocom::client::GeoComError]) -> String {
+fn still_note(errs: &[activesense_instrument::geocom::client::GeoComError]) -> String {
     if errs.is_empty() {
         "instrument left still, EDM off".to_owned()
     } else {
@@ -529,7 +529,7 @@ pub fn run_sim(a: GeocomSimArgs) -> Result<()> {
     if a.pty {
         #[cfg(unix)]
         {
-            let (path, _) = crate::geocom::sim::serve_pty(sim)?;
+            let (path, _) = activesense_instrument::geocom::sim::serve_pty(sim)?;
             println!(
                 "geocom-sim: room {name} on pty {path} (connect with --link geocom:serial:{path})"
             );
@@ -548,6 +548,6 @@ pub fn run_sim(a: GeocomSimArgs) -> Result<()> {
         std::net::TcpListener::bind(addr).with_context(|| format!("cannot listen on {addr}"))?;
     let local = listener.local_addr()?;
     println!("geocom-sim: room {name} on tcp:{local} (connect with --link geocom:tcp:{local})");
-    crate::geocom::sim::serve_tcp(listener, sim)?;
+    activesense_instrument::geocom::sim::serve_tcp(listener, sim)?;
     Ok(())
 }

@@ -11,7 +11,7 @@ pub struct TrainArgs {
     // Every hyper-parameter flag (--rot-bins, --updates, --seed, --envs, ...): their
     // defaults and help are written once, in HyperParams.
     #[command(flatten)]
-    hp: crate::learn::train::HyperParams,
+    hp: activesense_lab::learn::train::HyperParams,
     /// Stop after this many minutes of wall time even if --updates is not reached (the
     /// result then depends on the machine's speed; --updates alone is reproducible).
     #[arg(long)]
@@ -32,7 +32,8 @@ pub struct TrainArgs {
 }
 
 pub fn run(a: TrainArgs) -> Result<()> {
-    use crate::learn::{agent::shape_for, file, train};
+    use activesense_instrument::learn::{agent::shape_for, file};
+    use activesense_lab::learn::train;
     use std::io::IsTerminal;
     if a.hp.rot_bins != 1 && a.hp.rot_bins != 10 {
         bail!(
@@ -51,7 +52,7 @@ pub fn run(a: TrainArgs) -> Result<()> {
     eprintln!(
         "training K = {}: network {} ({} parameters, {} multiply-accumulates per decision), {} threads",
         hp.rot_bins,
-        crate::learn::net::ARCH_NAME,
+        activesense_instrument::learn::net::ARCH_NAME,
         shape.param_count(),
         shape.macs(),
         rayon::current_num_threads()

@@ -21,9 +21,8 @@
 //! **Precision.** `sigma_*` are one standard deviation from
 //! [`activesense_core::registration::precision::pose_covariance`] with the range noise
 //! [`PRECISION_SIGMA_FACTOR`] × the sensor's σ; `activesense answer-coverage` measures how
-//! often the true pose lies within the printed 2σ ([`coverage`]).
+//! often the true pose lies within the printed 2σ (`activesense_lab::coverage`).
 
-pub mod coverage;
 mod text;
 
 use crate::episode::Trajectory;

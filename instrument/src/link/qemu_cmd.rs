@@ -8,7 +8,7 @@
 //! on the small no_std core, never on this std crate with its clap, rayon, serial-port and DXF
 //! dependencies; and the core is no_std (no `std::process`) and owned by the firmware side.
 //! So this file imports nothing but `std`, and xtask compiles the same file as its own module
-//! (`#[path = "../../host-sim/src/link/qemu_cmd.rs"] mod qemu_cmd;`). Keep it std-only.
+//! (`#[path = "../../instrument/src/link/qemu_cmd.rs"] mod qemu_cmd;`). Keep it std-only.
 
 use std::path::Path;
 use std::process::Command;

@@ -130,11 +130,7 @@ pub fn run_one(
 
 /// Opens `spec`; `--timeout-ms`, when given, fixes the reply time-out, else it follows
 /// the device's announcement.
-pub(crate) fn open_link(
-    spec: &LinkSpec,
-    qemu_args: &[String],
-    timeout_ms: Option<u64>,
-) -> Result<Link> {
+pub fn open_link(spec: &LinkSpec, qemu_args: &[String], timeout_ms: Option<u64>) -> Result<Link> {
     let floor = timeout_ms.map_or(serial::HANDSHAKE_TIMEOUT, Duration::from_millis);
     let mut link = serial::open_with_qemu_args(spec, floor, qemu_args)
         .with_context(|| format!("opening {spec}"))?;
@@ -145,7 +141,7 @@ pub(crate) fn open_link(
 }
 
 /// The host's side of the link summary: what it took to get the frames through.
-pub(crate) fn print_link_counters(link: &Link, restarts: u32) {
+pub fn print_link_counters(link: &Link, restarts: u32) {
     println!(
         "link (host): {}, {} episode restarts; reply time-out {} ms",
         link.client.counters().summary(),
@@ -155,7 +151,7 @@ pub(crate) fn print_link_counters(link: &Link, restarts: u32) {
 }
 
 /// Ends a command's session: `Shutdown` with `--shutdown`, else leave the device serving.
-pub(crate) fn end_session(link: Link, shutdown: bool) -> Result<(String, Vec<u8>)> {
+pub fn end_session(link: Link, shutdown: bool) -> Result<(String, Vec<u8>)> {
     if shutdown {
         link.shutdown_with_stderr()
             .context("shutting the device down")

@@ -31,7 +31,7 @@ pub const TRAIN_SEEDS: Range<u32> = 0..1_000_000;
 /// Seeds of the fixed evaluation set: 1000 plans.
 pub const TEST_SEEDS: Range<u32> = 1_000_000..1_001_000;
 /// Seeds of the validation set, on which the committed policy of a configuration is
-/// picked among its training seeds (`host-sim/examples/select_seed.rs`): drawn neither for
+/// picked among its training seeds (`lab/examples/select_seed.rs`): drawn neither for
 /// training nor for the test.
 pub const VALIDATION_SEEDS: Range<u32> = 1_001_000..1_002_000;
 /// Seeds of the calibrated stop's plans (`activesense calibrate`): outside the training

@@ -14,14 +14,14 @@
 //! check that stands in for the project's symmetry detector.
 
 use crate::baselines::classical::{ClassicalConfig, ClassicalLocalizer};
-use crate::world::plans::{self, TEST_SEEDS};
-use crate::world::sensor::SensorModel;
-use crate::world::SimWorld;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::localization::{GhtLocalizer, LocalizerConfig};
 use activesense_core::world::geometry::rotate;
 use activesense_core::world::math::TAU;
 use activesense_core::{FloorPlan, Pose2};
+use activesense_instrument::world::plans::{self, TEST_SEEDS};
+use activesense_instrument::world::sensor::SensorModel;
+use activesense_instrument::world::SimWorld;
 use anyhow::{anyhow, Result};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg32;

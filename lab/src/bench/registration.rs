@@ -14,9 +14,6 @@
 //! `‖â − a‖`, the heading error, and the symmetry-aware pose distance of §3.4
 //! ([`PoseDistance::agent_distance`]), each as median / p90 / p99 / max and a histogram.
 
-use crate::world::plans;
-use crate::world::sensor::SensorModel;
-use crate::world::SimWorld;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::registration::pose_distance::PoseDistance;
 use activesense_core::registration::{
@@ -25,6 +22,9 @@ use activesense_core::registration::{
 use activesense_core::world::math::{wrap_angle, TAU};
 use activesense_core::world::symmetry::SymmetryTolerance;
 use activesense_core::Pose2;
+use activesense_instrument::world::plans;
+use activesense_instrument::world::sensor::SensorModel;
+use activesense_instrument::world::SimWorld;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg32;
 use serde::{Deserialize, Serialize};
@@ -225,7 +225,8 @@ fn take_measurements(world: &SimWorld, n: usize, rng: &mut Pcg32) -> (Vec<Measur
                     .measure(world.plan(), truth.translation(), truth.theta + beta, rng);
             if let Some(r) = r {
                 if r > 0.0 {
-                    outliers += (kind == crate::world::sensor::RangeKind::Outlier) as usize;
+                    outliers += (kind == activesense_instrument::world::sensor::RangeKind::Outlier)
+                        as usize;
                     out.push(Measurement::new(beta, r));
                     break;
                 }

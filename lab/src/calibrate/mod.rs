@@ -1,7 +1,7 @@
 //! `activesense calibrate`: fits the calibrated stop's models ([`activesense_core::stop`]).
 //!
 //! Episodes of several agents run on calibration plans (generated seeds from
-//! `--first-seed`, by default the start of [`plans::CALIBRATION_SEEDS`], which training,
+//! `--first-seed`, by default the start of [`CALIBRATION_SEEDS`](activesense_instrument::world::plans::CALIBRATION_SEEDS), which training,
 //! test and validation never draw) to the action limit. After every returned range
 //! whose belief passes the stop gate, the pipeline's [`StopFeatures`] are recorded with the
 //! label "the answer is wrong": the refined pose the stop would answer with is outside the
@@ -18,11 +18,8 @@ mod logistic;
 
 pub use logistic::fit_logistic;
 
-use crate::episode::{parse_agent, Termination};
 use crate::eval::harness::{episode_bar, EvalOptions};
 use crate::eval::stats::wilson_at;
-use crate::learn::agent::{run_agent_episode_observed, Policies};
-use crate::world::plans;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::registration::pose_distance::PoseDistance;
@@ -30,71 +27,45 @@ use activesense_core::stop::{
     interpolate_table, stop_score, AgentTable, StopFeatures, StopModel, AGENT_TABLES, FEATURES,
     STATED_RISKS,
 };
-use clap::Args;
+use activesense_instrument::episode::Termination;
+use activesense_instrument::learn::agent::{run_agent_episode_observed, Policies};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-/// `activesense calibrate` arguments.
-#[derive(Args, Debug)]
-pub struct CalibrateArgs {
-    /// Agents whose episodes provide the samples (comma-separated; the learnt agent uses the
-    /// committed policies).
-    #[arg(long, default_value = "heuristic-1,learnt,blind-0,heuristic-0,oigm")]
-    pub agents: String,
+/// What one calibration run fits: the parsed `activesense calibrate` options.
+#[derive(Clone, Debug)]
+pub struct CalibrateOptions {
+    /// Agents whose episodes provide the samples.
+    pub agents: Vec<AgentKind>,
     /// Rotation settings to fit (one model each).
-    #[arg(long, default_value = "1,10")]
-    pub rot_bins: String,
-    /// Calibration plans per agent and setting (even-indexed ones fit, odd-indexed ones check).
-    #[arg(long, default_value_t = 1000)]
+    pub rot_bins: Vec<u8>,
+    /// Agents whose fitting episodes set the pooled threshold table.
+    pub threshold_agents: Vec<AgentKind>,
+    /// Agents that also get a threshold table of their own (at most [`AGENT_TABLES`]).
+    pub table_agents: Vec<AgentKind>,
+    /// Calibration plans per agent and setting (even-indexed fit, odd-indexed check).
     pub plans: u32,
-    /// First calibration plan seed (default: the calibration range, which the training,
-    /// test and validation sets never draw from).
-    #[arg(long, default_value_t = plans::CALIBRATION_SEEDS.start)]
+    /// First calibration plan seed.
     pub first_seed: u32,
     /// Episode seed.
-    #[arg(long, default_value_t = 0)]
     pub episode_seed: u64,
     /// Action limit of the calibration episodes.
-    #[arg(long, default_value_t = 100)]
     pub max_actions: u16,
-    /// Agents whose fitting episodes set the threshold table (the stated risk → threshold
-    /// map, `StopModel::thresholds`; default: every agent of --agents). Each must be among
-    /// --agents. Pooled by default: the table must not depend on a policy trained against
-    /// the stop it belongs to (`docs/LEARNING.md`), and one agent's 500 fitting episodes
-    /// leave its rare wrong stops too few to place a threshold by.
-    #[arg(long)]
-    pub threshold_agents: Option<String>,
-    /// Agents that also get a threshold table of their own (`StopModel::agent_tables`, at
-    /// most 2; the agents an instrument runs; "none" for none). Each must be among
-    /// --agents; the learnt policy's table serves learnt-int8 too.
-    #[arg(long, default_value = "learnt,heuristic-1")]
-    pub agent_tables: String,
-    /// Calibration plans per setting for the agents of --agent-tables (at least --plans;
-    /// the first --plans are the pooled fit's episodes, the rest run for the table alone).
-    /// One agent's 500 fitting episodes hold about five wrong stops at 1 %, too few to
-    /// place its threshold by, and 4000 held about four at 0.1 % (`docs/EVALUATION.md`,
-    /// "Twelve thousand episodes per table").
-    #[arg(long, default_value_t = 12000)]
+    /// Calibration plans per setting for the agents of `table_agents`.
     pub agent_table_plans: u32,
     /// Ridge (L2) penalty on the weights.
-    #[arg(long, default_value_t = 1e-3)]
     pub ridge: f64,
-    /// Where to write the fitted models as Rust source (the file the core compiles).
-    #[arg(long, default_value = "core-nostd/src/stop/calibration.rs")]
+    /// Where to write the fitted models as Rust source.
     pub rust_out: PathBuf,
-    /// Directory of the report (calibration.md, calibration.json).
-    #[arg(long, default_value = "results/calibration")]
+    /// Directory of the report.
     pub out: PathBuf,
     /// Worker threads (default: all cores).
-    #[arg(long)]
     pub threads: Option<usize>,
-    /// Also write every decision point (features, label) as JSON lines to this file.
-    #[arg(long)]
+    /// Also write every decision point as JSON lines here.
     pub samples_out: Option<PathBuf>,
-    /// Do not draw a progress bar.
-    #[arg(long)]
-    pub no_progress: bool,
+    /// Draw a progress bar.
+    pub progress: bool,
 }
 
 /// One recorded decision point.
@@ -432,7 +403,7 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
     s.push_str(command);
     s.push_str("`; do not edit by hand\n");
     s.push_str("//! (the held-out check is in `results/calibration/calibration.md`).\n\n");
-    s.push_str("use crate::episode::AgentKind;\nuse crate::stop::{AgentTable, StopModel};\n\n");
+    s.push_str("use activesense_instrument::episode::AgentKind;\nuse crate::stop::{AgentTable, StopModel};\n\n");
     s.push_str("/// One model per fitted rotation setting.\npub const MODELS: &[StopModel] = &[\n");
     for f in fitted {
         // One weight a line, as rustfmt lays the array out: the generated file is the
@@ -528,55 +499,10 @@ pub fn markdown(fitted: &[Fitted], command: &str) -> String {
     s
 }
 
-/// Runs `activesense calibrate`.
-pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
-    let agents = a
-        .agents
-        .split(',')
-        .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let rot_bins = a
-        .rot_bins
-        .split(',')
-        .map(|s| {
-            s.trim()
-                .parse::<u8>()
-                .map_err(|e| anyhow::anyhow!("--rot-bins '{s}': {e}"))
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let threshold_agents = a
-        .threshold_agents
-        .as_deref()
-        .unwrap_or(&a.agents)
-        .split(',')
-        .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    if let Some(k) = threshold_agents.iter().find(|k| !agents.contains(k)) {
-        anyhow::bail!("--threshold-agents: {k:?} is not among --agents");
-    }
-    let table_agents = match a.agent_tables.trim() {
-        "" | "none" => Vec::new(),
-        list => list
-            .split(',')
-            .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
-            .collect::<anyhow::Result<Vec<_>>>()?,
-    };
-    if let Some(k) = table_agents.iter().find(|k| !agents.contains(k)) {
-        anyhow::bail!("--agent-tables: {k:?} is not among --agents");
-    }
-    if table_agents.len() > AGENT_TABLES {
-        anyhow::bail!("--agent-tables: at most {AGENT_TABLES} agents have a table of their own");
-    }
-    if a.plans < 2 {
-        anyhow::bail!("--plans must be at least 2 (half fit, half check)");
-    }
-    if a.agent_table_plans < a.plans {
-        anyhow::bail!(
-            "--agent-table-plans ({}) must be at least --plans ({})",
-            a.agent_table_plans,
-            a.plans
-        );
-    }
+/// Runs one calibration (`command`: the command line, recorded in the generated source).
+pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
+    let (agents, rot_bins, threshold_agents, table_agents) =
+        (&a.agents, &a.rot_bins, &a.threshold_agents, &a.table_agents);
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(t)
@@ -605,19 +531,15 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
         termination: Termination::ActionLimit,
         policy_files: Vec::new(),
         policies,
-        progress: !a.no_progress,
+        progress: a.progress,
         curve_plans: 0,
         tolerance: Default::default(),
         user_plans: Vec::new(),
         refused_plans: Vec::new(),
     };
-    let command = std::iter::once("activesense".to_string())
-        .chain(std::env::args().skip(1))
-        .collect::<Vec<_>>()
-        .join(" ");
     let t0 = std::time::Instant::now();
     let mut fitted = Vec::new();
-    for &k in &rot_bins {
+    for &k in rot_bins {
         eprintln!(
             "K = {k}: running {} episodes",
             agents.len() as u32 * a.plans

@@ -5,9 +5,9 @@
 use super::harness::{episode_bar, groups_and_jobs, EvalOptions};
 use super::report::{opt, plan_source};
 use super::stats::{quantile, MeanCi};
-use crate::episode::{score, EpisodeView, Termination};
-use crate::learn::agent::run_agent_episode_observed;
 use crate::plot::{self, ExtraLine};
+use activesense_instrument::episode::{score, EpisodeView, Termination};
+use activesense_instrument::learn::agent::run_agent_episode_observed;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;

@@ -4,12 +4,12 @@
 
 use super::record::{CurveRecorder, EpisodeCurve, EpisodeRow};
 use super::stats::{aggregate, GroupResult};
-use crate::episode::{EpisodeSpec, Termination};
-use crate::learn::agent::{run_agent_episode_observed, Policies};
-use crate::world::sensor::SensorModel;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::registration::pose_distance::Tolerance;
+use activesense_instrument::episode::{EpisodeSpec, Termination};
+use activesense_instrument::learn::agent::{run_agent_episode_observed, Policies};
+use activesense_instrument::world::sensor::SensorModel;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -50,7 +50,7 @@ pub struct EvalOptions {
     /// The user's rooms (`--plans-from`, `docs/PLANS.md`): when not empty they replace the
     /// generated plans, and `plans` is their number.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub user_plans: Vec<crate::world::planfile::NamedPlan>,
+    pub user_plans: Vec<activesense_instrument::world::planfile::NamedPlan>,
     /// When an answer is right (`--tolerance`; default 5 cm and 0.5°).
     #[serde(default)]
     pub tolerance: Tolerance,

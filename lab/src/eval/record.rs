@@ -4,7 +4,7 @@
 //! budgets, the cost points). The lowest layer of [`crate::eval`]: [`super::stats`]
 //! aggregates these, [`super::harness`] produces them.
 
-use crate::episode::{score, EpisodeView, Trajectory};
+use activesense_instrument::episode::{score, EpisodeView, Trajectory};
 use serde::{Deserialize, Serialize};
 
 /// Summary of one episode kept for aggregation.
@@ -67,8 +67,8 @@ impl EpisodeRow {
             heading_error_deg: t.outcome.errors.map(|e| e.heading.to_degrees()),
             symmetry_order: t.outcome.symmetry_order,
             final_peak_mass: 0.0,
-            stopped_by_rule: t.end != crate::episode::EndReason::ActionLimit,
-            risk_at_stop: (t.end == crate::episode::EndReason::Confident)
+            stopped_by_rule: t.end != activesense_instrument::episode::EndReason::ActionLimit,
+            risk_at_stop: (t.end == activesense_instrument::episode::EndReason::Confident)
                 .then_some(t.outcome.stop_risk)
                 .flatten(),
             repeated_bearings: {

@@ -3,18 +3,18 @@
 
 use super::harness::{run, EvalOptions};
 use super::stats::wilson;
-use crate::episode::Termination;
-use crate::learn::agent::Policies;
-use crate::world::sensor::SensorModel;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
+use activesense_instrument::episode::Termination;
+use activesense_instrument::learn::agent::Policies;
+use activesense_instrument::world::sensor::SensorModel;
 
 fn small(plans: u32) -> EvalOptions {
     EvalOptions {
         agents: vec![AgentKind::Heuristic1, AgentKind::Blind2],
         rot_bins: vec![1, 10],
         plans,
-        first_seed: crate::world::plans::TEST_SEEDS.start,
+        first_seed: activesense_instrument::world::plans::TEST_SEEDS.start,
         episode_seed: 0,
         config: EpisodeConfig::default(),
         sensor: SensorModel::default(),

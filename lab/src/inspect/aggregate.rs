@@ -2,7 +2,7 @@
 //! measurement and rotation decisions, averaged over many test-plan episodes.
 //!
 //! Every decision of every episode gives one guided-back-propagation map over the belief
-//! ([`crate::learn::net::PolicyNet::guided_backprop`] of the chosen action's logit). Each map
+//! ([`activesense_instrument::learn::net::PolicyNet::guided_backprop`] of the chosen action's logit). Each map
 //! is reduced to its positive part, summed over the rotation channels, and normalised by its
 //! own largest value (a decision whose map is all ≤ 0 is counted but adds nothing), so every
 //! decision weighs the same. The maps are averaged separately over measure and rotate
@@ -20,13 +20,13 @@
 //! normalised belief of the same cells.
 
 use super::record_episode;
-use crate::episode::{EpisodeSpec, Termination, Trajectory};
-use crate::learn::agent::LearntPolicy;
-use crate::world::plans;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::episode::{Action, AgentKind};
 use activesense_core::policy::BELIEF_SIDE;
 use activesense_core::world::geometry::{length, v2};
+use activesense_instrument::episode::{EpisodeSpec, Termination, Trajectory};
+use activesense_instrument::learn::agent::LearntPolicy;
+use activesense_instrument::world::plans;
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -645,7 +645,7 @@ impl Default for AggregateOptions {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::learn::agent::default_policy_path;
+    use activesense_instrument::learn::agent::default_policy_path;
 
     #[test]
     fn aggregate_counts_every_decision_and_ignores_the_thread_count() {

@@ -4,11 +4,11 @@
 //! (Springenberg et al. 2014) of which parts of the state drove each chosen action.
 //!
 //! - [`record_episode`]: plays the float policy greedily (the same actions as
-//!   [`crate::learn::agent::LearntAgent`]) and stores, per step, the belief map (all rotation
+//!   [`activesense_instrument::learn::agent::LearntAgent`]) and stores, per step, the belief map (all rotation
 //!   channels), the side features (scans, action history, beam, step, measurements), the
 //!   logits, action probabilities and value, and the guided-back-propagation maps of the
 //!   chosen action's logit over the belief and the side features
-//!   ([`crate::learn::net::PolicyNet::guided_backprop`]).
+//!   ([`activesense_instrument::learn::net::PolicyNet::guided_backprop`]).
 //! - [`load_trajectory`]: reads a trajectory JSON written by `activesense episode --json`,
 //!   refusing another format version or a broken file with one line naming the file.
 //! - [`render_page`]: the HTML page (inline CSS and JavaScript written in this repository,
@@ -17,14 +17,16 @@
 
 pub mod aggregate;
 
-use crate::episode::{
-    run_episode_with, EpisodeSpec, InspectionHeader, StepInspection, Trajectory, TRAJECTORY_FORMAT,
-};
-use crate::learn::agent::{argmax, masked_features, InputMask, LearntPolicy, ACTIONS};
-use crate::learn::net::{softmax, PolicyNet};
 use activesense_core::episode::Action;
 use activesense_core::localization::grid::GridSpec;
 use activesense_core::policy::{Policy, PolicyInput, BELIEF_SIDE, SIDE_FEATURES};
+use activesense_instrument::episode::{
+    run_episode_with, EpisodeSpec, InspectionHeader, StepInspection, Trajectory, TRAJECTORY_FORMAT,
+};
+use activesense_instrument::learn::agent::{
+    argmax, masked_features, InputMask, LearntPolicy, ACTIONS,
+};
+use activesense_instrument::learn::net::{softmax, PolicyNet};
 use anyhow::{bail, Context, Result};
 use std::path::Path;
 
@@ -191,80 +193,6 @@ pub fn html_escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
-/// `activesense inspect`.
-#[derive(clap::Args, Debug)]
-pub struct InspectArgs {
-    /// Trajectory JSON written by `activesense episode --agent learnt --json FILE` (not with
-    /// --aggregate).
-    pub trajectory: Option<std::path::PathBuf>,
-    /// The HTML page to write; with --aggregate, the output directory.
-    #[arg(long)]
-    pub out: std::path::PathBuf,
-    /// Instead of one page: the Fig.-4 analysis over many test-plan episodes (mean
-    /// normalised guided-back-propagation maps of measure and rotate decisions).
-    #[arg(long)]
-    pub aggregate: bool,
-    /// Agent of the aggregate episodes (only the learnt float policy has maps).
-    #[arg(long, value_parser = crate::episode::parse_agent, default_value = "learnt")]
-    pub agent: activesense_core::episode::AgentKind,
-    /// Test plans of the aggregate (seeds from 1000000 on).
-    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    pub plans: u32,
-    /// Rotation bins of the aggregate episodes: 1 or 10.
-    #[arg(long, default_value_t = 1)]
-    pub rot_bins: u8,
-    /// Episode seed of the aggregate episodes.
-    #[arg(long, default_value_t = 0)]
-    pub episode_seed: u64,
-    /// Float policy file for the aggregate (default: the committed policies/k{K}/policy.policy).
-    #[arg(long)]
-    pub policy: Option<std::path::PathBuf>,
-    /// Do not draw a progress bar.
-    #[arg(long)]
-    pub no_progress: bool,
-}
-
-/// Runs `activesense inspect` (`command`: the command line, recorded in the aggregate).
-pub fn cmd_inspect(a: InspectArgs, command: &str) -> Result<()> {
-    use std::io::IsTerminal;
-    if !a.aggregate {
-        let Some(path) = &a.trajectory else {
-            bail!("give a trajectory JSON (activesense episode --agent learnt --json FILE), or --aggregate");
-        };
-        write_page(path, &a.out)?;
-        println!("wrote {}", a.out.display());
-        return Ok(());
-    }
-    if let Some(p) = &a.trajectory {
-        bail!(
-            "--aggregate runs its own episodes; do not give a trajectory ('{}')",
-            p.display()
-        );
-    }
-    if a.agent != activesense_core::episode::AgentKind::Learnt {
-        bail!(
-            "--aggregate needs --agent learnt (only the float policy has guided back-propagation maps), got {}",
-            a.agent.name()
-        );
-    }
-    if a.rot_bins != 1 && a.rot_bins != 10 {
-        bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
-    }
-    let path = a
-        .policy
-        .clone()
-        .unwrap_or_else(|| crate::learn::agent::default_policy_path(a.rot_bins));
-    let policy = LearntPolicy::load(&path, a.rot_bins)?;
-    let opts = aggregate::AggregateOptions {
-        plans: a.plans,
-        episode_seed: a.episode_seed,
-        rot_bins: a.rot_bins,
-        progress: !a.no_progress && std::io::stderr().is_terminal(),
-        ..Default::default()
-    };
-    aggregate::cmd(&opts, &policy, &a.out, command)
-}
-
 /// `activesense inspect TRAJECTORY --out PAGE`.
 pub fn write_page(trajectory: &Path, out: &Path) -> Result<()> {
     let t = load_trajectory(trajectory)?;
@@ -279,9 +207,9 @@ pub fn write_page(trajectory: &Path, out: &Path) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::learn::agent::{default_policy_path, run_agent_episode, Policies};
-    use crate::world::plans;
     use activesense_core::episode::AgentKind;
+    use activesense_instrument::learn::agent::{default_policy_path, run_agent_episode, Policies};
+    use activesense_instrument::world::plans;
 
     fn scratch(name: &str) -> std::path::PathBuf {
         let d =
@@ -305,7 +233,7 @@ mod tests {
         for s in &t.steps {
             let i = s.inspect.as_ref().unwrap();
             // The chosen action is the most probable, and its map is the guided one.
-            let a = crate::learn::agent::action_index(s.action);
+            let a = activesense_instrument::learn::agent::action_index(s.action);
             assert_eq!(argmax(&i.logits), a);
             assert!((i.probs.iter().sum::<f32>() - 1.0).abs() < 1e-5);
             let (gb, gs) = policy.net.guided_backprop(&i.belief, &i.side, a);
@@ -361,7 +289,7 @@ mod tests {
             text[..text.len() / 2].into(),
             "not valid JSON",
         );
-        let base = crate::episode::run_episode(&EpisodeSpec::new(
+        let base = activesense_instrument::episode::run_episode(&EpisodeSpec::new(
             plans::TEST_SEEDS.start,
             AgentKind::Heuristic1,
         ));

@@ -6,8 +6,8 @@
 //! the code and the CLI cannot disagree. A run prints the set ([`HyperParams::table`]) and
 //! stores it in the policy file's metadata (`hyper_params`).
 
-use super::agent::InputMask;
 use activesense_core::episode::{AgentKind, Termination};
+use activesense_instrument::learn::agent::InputMask;
 use clap::{Args, FromArgMatches};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -169,7 +169,7 @@ fn default_wrong_penalty() -> f32 {
 /// The episode's termination parser, less `action-limit` (an episode that never stops
 /// teaches no stop).
 fn parse_termination(s: &str) -> Result<Termination, String> {
-    match crate::episode::parse_termination(s)? {
+    match activesense_instrument::episode::parse_termination(s)? {
         Termination::ActionLimit => {
             Err("a training episode ends by `oracle` or `confident`, not `action-limit`".into())
         }

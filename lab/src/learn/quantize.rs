@@ -22,17 +22,17 @@
 //! The integer inference is the core's, integer-only, so what the host computes here is
 //! bit for bit what the instrument computes from the same blob and the same state.
 
-use super::agent::{argmax, features, shape_for, LearntAgent, ACTIONS};
-use super::net::{PolicyNet, Scratch, ARCH_ID, N_LAYERS};
-use crate::episode::{run_episode_with, EpisodeSpec, Termination, Trajectory};
-use crate::world::plans;
-use crate::world::sensor::SensorModel;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::episode::{Action, AgentKind};
 use activesense_core::policy::int8::{
     self as q, LayerTensors, QuantParams, QuantizedAgent, QuantizedPolicy,
 };
 use activesense_core::policy::{Policy, PolicyInput, SIDE_FEATURES};
+use activesense_instrument::episode::{run_episode_with, EpisodeSpec, Termination, Trajectory};
+use activesense_instrument::learn::agent::{argmax, features, shape_for, LearntAgent, ACTIONS};
+use activesense_instrument::learn::net::{PolicyNet, Scratch, ARCH_ID, N_LAYERS};
+use activesense_instrument::world::plans;
+use activesense_instrument::world::sensor::SensorModel;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;

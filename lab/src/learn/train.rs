@@ -33,14 +33,7 @@
 //! reduced in a fixed chunk order. The same seed gives the same weights byte for byte,
 //! whatever the number of threads.
 
-use super::agent::{action_index, masked_features, shape_for, ACTIONS};
-use super::file;
 pub use super::hyper::HyperParams;
-use super::net::{self, Adam, BatchCache, NetShape, PolicyNet};
-use crate::episode::{score, start_episode, EpisodeSpec};
-use crate::world::plans;
-use crate::world::sensor::SensorModel;
-use crate::world::SimWorld;
 use activesense_core::episode::EpisodeConfig;
 use activesense_core::episode::{Action, AgentKind};
 use activesense_core::pipeline::runner::EpisodeRunner;
@@ -49,6 +42,13 @@ use activesense_core::policy::BaselineAgent;
 use activesense_core::policy::{Policy, BELIEF_PLANE, SIDE_FEATURES};
 use activesense_core::registration::pose_distance::Tolerance;
 use activesense_core::{FloorPlan, Pose2};
+use activesense_instrument::episode::{score, start_episode, EpisodeSpec};
+use activesense_instrument::learn::agent::{action_index, masked_features, shape_for, ACTIONS};
+use activesense_instrument::learn::file;
+use activesense_instrument::learn::net::{self, Adam, BatchCache, NetShape, PolicyNet};
+use activesense_instrument::world::plans;
+use activesense_instrument::world::sensor::SensorModel;
+use activesense_instrument::world::SimWorld;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::{Rng, SeedableRng};
@@ -738,9 +738,9 @@ pub fn write_text(path: &Path, text: &str) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::episode::run_episode_with;
-    use crate::learn::agent::features;
     use activesense_core::policy::PolicyInput;
+    use activesense_instrument::episode::run_episode_with;
+    use activesense_instrument::learn::agent::features;
 
     fn tiny(rot_bins: u8, updates: u64, imitation: u64) -> HyperParams {
         HyperParams {
@@ -844,7 +844,9 @@ mod tests {
         let n = 12;
         for i in 0..n {
             let mut env = Env::new(hp, 1000 + i);
-            let mut agent = super::super::agent::LearntAgent::new(std::sync::Arc::new(net.clone()));
+            let mut agent = activesense_instrument::learn::agent::LearntAgent::new(
+                std::sync::Arc::new(net.clone()),
+            );
             loop {
                 let a = env.runner.decide(&mut agent).expect("running");
                 if let (_, Some(f)) = env.step(hp, a, 0.0) {

@@ -6,12 +6,11 @@
 //! one line per agent, one row of two panels per rotation setting, [`budget_svg`]) and the
 //! generic multi-panel line chart [`line_panels`] with its shared legend. [`charts`] holds
 //! the evaluation's other charts (utility curves, reliability diagram, extra
-//! measurements), [`curve`] the trainer's learning curve, and [`svg`] the plan and episode
-//! scene.
+//! measurements) and [`curve`] the trainer's learning curve. The plan and episode scene is
+//! the instrument's (`activesense_instrument::plot::svg`).
 
 pub mod charts;
 pub mod curve;
-pub mod svg;
 
 pub use charts::{
     extra_svg, reliability_svg, utility_svg, ExtraLine, ReliabilityLine, UtilityLine,

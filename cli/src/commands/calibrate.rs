@@ -1,0 +1,144 @@
+//! `activesense calibrate`: the options of the stop's calibration, parsed and checked; the
+//! fit itself is `activesense_lab::calibrate`.
+
+use activesense_core::stop::AGENT_TABLES;
+use activesense_instrument::episode::parse_agent;
+use activesense_instrument::world::plans;
+use activesense_lab::calibrate::{calibrate, CalibrateOptions};
+use clap::Args;
+use std::path::PathBuf;
+
+/// `activesense calibrate` arguments.
+#[derive(Args, Debug)]
+pub struct CalibrateArgs {
+    /// Agents whose episodes provide the samples (comma-separated; the learnt agent uses the
+    /// committed policies).
+    #[arg(long, default_value = "heuristic-1,learnt,blind-0,heuristic-0,oigm")]
+    pub agents: String,
+    /// Rotation settings to fit (one model each).
+    #[arg(long, default_value = "1,10")]
+    pub rot_bins: String,
+    /// Calibration plans per agent and setting (even-indexed ones fit, odd-indexed ones check).
+    #[arg(long, default_value_t = 1000)]
+    pub plans: u32,
+    /// First calibration plan seed (default: the calibration range, which the training,
+    /// test and validation sets never draw from).
+    #[arg(long, default_value_t = plans::CALIBRATION_SEEDS.start)]
+    pub first_seed: u32,
+    /// Episode seed.
+    #[arg(long, default_value_t = 0)]
+    pub episode_seed: u64,
+    /// Action limit of the calibration episodes.
+    #[arg(long, default_value_t = 100)]
+    pub max_actions: u16,
+    /// Agents whose fitting episodes set the threshold table (the stated risk → threshold
+    /// map, `StopModel::thresholds`; default: every agent of --agents). Each must be among
+    /// --agents. Pooled by default: the table must not depend on a policy trained against
+    /// the stop it belongs to (`docs/LEARNING.md`), and one agent's 500 fitting episodes
+    /// leave its rare wrong stops too few to place a threshold by.
+    #[arg(long)]
+    pub threshold_agents: Option<String>,
+    /// Agents that also get a threshold table of their own (`StopModel::agent_tables`, at
+    /// most 2; the agents an instrument runs; "none" for none). Each must be among
+    /// --agents; the learnt policy's table serves learnt-int8 too.
+    #[arg(long, default_value = "learnt,heuristic-1")]
+    pub agent_tables: String,
+    /// Calibration plans per setting for the agents of --agent-tables (at least --plans;
+    /// the first --plans are the pooled fit's episodes, the rest run for the table alone).
+    /// One agent's 500 fitting episodes hold about five wrong stops at 1 %, too few to
+    /// place its threshold by, and 4000 held about four at 0.1 % (`docs/EVALUATION.md`,
+    /// "Twelve thousand episodes per table").
+    #[arg(long, default_value_t = 12000)]
+    pub agent_table_plans: u32,
+    /// Ridge (L2) penalty on the weights.
+    #[arg(long, default_value_t = 1e-3)]
+    pub ridge: f64,
+    /// Where to write the fitted models as Rust source (the file the core compiles).
+    #[arg(long, default_value = "core-nostd/src/stop/calibration.rs")]
+    pub rust_out: PathBuf,
+    /// Directory of the report (calibration.md, calibration.json).
+    #[arg(long, default_value = "results/calibration")]
+    pub out: PathBuf,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Also write every decision point (features, label) as JSON lines to this file.
+    #[arg(long)]
+    pub samples_out: Option<PathBuf>,
+    /// Do not draw a progress bar.
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+/// Runs `activesense calibrate`.
+pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
+    let agents = a
+        .agents
+        .split(',')
+        .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let rot_bins = a
+        .rot_bins
+        .split(',')
+        .map(|s| {
+            s.trim()
+                .parse::<u8>()
+                .map_err(|e| anyhow::anyhow!("--rot-bins '{s}': {e}"))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let threshold_agents = a
+        .threshold_agents
+        .as_deref()
+        .unwrap_or(&a.agents)
+        .split(',')
+        .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    if let Some(k) = threshold_agents.iter().find(|k| !agents.contains(k)) {
+        anyhow::bail!("--threshold-agents: {k:?} is not among --agents");
+    }
+    let table_agents = match a.agent_tables.trim() {
+        "" | "none" => Vec::new(),
+        list => list
+            .split(',')
+            .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
+            .collect::<anyhow::Result<Vec<_>>>()?,
+    };
+    if let Some(k) = table_agents.iter().find(|k| !agents.contains(k)) {
+        anyhow::bail!("--agent-tables: {k:?} is not among --agents");
+    }
+    if table_agents.len() > AGENT_TABLES {
+        anyhow::bail!("--agent-tables: at most {AGENT_TABLES} agents have a table of their own");
+    }
+    if a.plans < 2 {
+        anyhow::bail!("--plans must be at least 2 (half fit, half check)");
+    }
+    if a.agent_table_plans < a.plans {
+        anyhow::bail!(
+            "--agent-table-plans ({}) must be at least --plans ({})",
+            a.agent_table_plans,
+            a.plans
+        );
+    }
+    let command = std::iter::once("activesense".to_string())
+        .chain(std::env::args().skip(1))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let opts = CalibrateOptions {
+        agents,
+        rot_bins,
+        threshold_agents,
+        table_agents,
+        plans: a.plans,
+        first_seed: a.first_seed,
+        episode_seed: a.episode_seed,
+        max_actions: a.max_actions,
+        agent_table_plans: a.agent_table_plans,
+        ridge: a.ridge,
+        rust_out: a.rust_out,
+        out: a.out,
+        threads: a.threads,
+        samples_out: a.samples_out,
+        progress: !a.no_progress,
+    };
+    calibrate(&opts, &command)
+}
