@@ -6,6 +6,7 @@
 //! of the listed candidates.
 
 use activesense_core::episode::AgentKind;
+use activesense_core::episode::EpisodeConfig;
 use activesense_core::registration::pose_distance::{PoseErrors, Tolerance};
 use activesense_instrument::answer::{Answer, Determination, HeadingHint};
 use activesense_instrument::episode::{run_episode, EpisodeSpec, Termination};
@@ -28,6 +29,10 @@ pub struct CoverageRun {
     pub agent: AgentKind,
     /// The termination rule.
     pub termination: Termination,
+    /// The episodes' configuration (action limit, stop risk, ...).
+    pub config: EpisodeConfig,
+    /// The first episode seed: a room's episodes take this and the next ones.
+    pub episode_seed: u64,
     /// A heading hint derived from each episode's truth (`truth + offset ± tol`), to
     /// measure the tie-break: `(offset, tol)` in degrees.
     pub hint: Option<(f64, f64)>,
@@ -214,7 +219,8 @@ fn spec_of(run: &CoverageRun, seed: u32, room: Option<&NamedPlan>, episode: u64)
     let mut spec = EpisodeSpec::new(seed, run.agent);
     spec.rot_bins = run.rot_bins;
     spec.termination = run.termination;
-    spec.episode_seed = episode;
+    spec.config = run.config;
+    spec.episode_seed = run.episode_seed.wrapping_add(episode);
     spec.user_plan = room.cloned();
     spec
 }

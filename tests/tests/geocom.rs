@@ -3,6 +3,7 @@
 //! fixtures and on generated plans; every injected fault class ends in a recovery or a
 //! one-line message naming the fault and the RPC, with the instrument left still.
 
+use activesense::commands::options::EpisodeOptions;
 use activesense::commands::station::{station, GeoComLink, StationArgs, StationReport};
 use activesense_core::episode::{AgentKind, EpisodeConfig};
 use activesense_instrument::episode::EpisodeSpec;
@@ -31,10 +32,12 @@ fn args(link: GeoComLink, plan: &Path, room: Option<String>, agent: AgentKind) -
         agent,
         policy: None,
         int8: None,
-        stop_risk: activesense_core::limits::DEFAULT_STOP_RISK,
-        max_actions: 60,
-        steps_per_turn: activesense_core::episode::DEFAULT_STEPS_PER_TURN,
-        episode_seed: 3,
+        episode: EpisodeOptions {
+            max_actions: 60,
+            episode_seed: 3,
+            termination: activesense_core::episode::Termination::Confident,
+            ..Default::default()
+        },
         vertical_deg: None,
         set_station: false,
         tie_break: None,
@@ -54,12 +57,12 @@ fn sim_config(a: &StationArgs, faults: Vec<FaultSpec>) -> SimConfig {
         .unwrap()
         .plan;
     let mut spec = EpisodeSpec::new(named.seed(), a.agent);
-    spec.episode_seed = a.episode_seed;
+    spec.episode_seed = a.episode.episode_seed;
     SimConfig {
         plan: named.plan,
         sensor: Default::default(),
         config: EpisodeConfig {
-            steps_per_turn: a.steps_per_turn,
+            steps_per_turn: a.episode.steps_per_turn,
             ..Default::default()
         },
         world_seed: spec.world_seed(),
@@ -327,8 +330,8 @@ fn set_station_writes_the_pose_and_orientation() {
     let file = fixtures().join("l-room.json");
     let mut a = args(dummy(), &file, None, AgentKind::Heuristic1);
     a.set_station = true;
-    a.max_actions = 100;
-    a.stop_risk = 0.05;
+    a.episode.max_actions = 100;
+    a.episode.stop_risk = 0.05;
     let (got, state) = through_sim(a, vec![]);
     let got = got.unwrap();
     assert_eq!(got.symmetry_order, 1);
@@ -370,7 +373,7 @@ fn an_ambiguous_answer_is_not_written_without_a_tie_break() {
     std::fs::write(&p, r#"{"vertices": [[0,0],[8,0],[8,5],[0,5]]}"#).unwrap();
     let mut a = args(dummy(), &p, None, AgentKind::Heuristic1);
     a.set_station = true;
-    a.max_actions = 100;
+    a.episode.max_actions = 100;
     let (got, state) = through_sim(a, vec![]);
     let msg = got.expect_err("must refuse").to_string();
     assert!(msg.contains("ambiguous"), "{msg}");
@@ -424,8 +427,8 @@ fn national_grid_dxf_gives_the_centred_rooms_answer() {
     let answer_of = |plan: &Path, tag: &str| {
         let mut a = args(dummy(), plan, None, AgentKind::Heuristic1);
         a.set_station = true;
-        a.max_actions = 300;
-        a.stop_risk = 0.1;
+        a.episode.max_actions = 300;
+        a.episode.stop_risk = 0.1;
         let out = dir.join(format!("{tag}.json"));
         a.json = Some(out.clone());
         let (got, state) = through_sim(a, vec![]);

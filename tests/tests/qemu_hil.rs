@@ -147,8 +147,7 @@ fn qemu_instruction_counts_reproducible() {
         episodes: 2,
         first_seed: TEST_SEEDS.start,
         agent: activesense_core::episode::AgentKind::Heuristic1,
-        episode_seed: 0,
-        termination: activesense_core::episode::Termination::Oracle,
+        options: Default::default(),
         timeout_ms: 20_000,
     };
     let a = mcu_bench(&args).expect("first run");

@@ -2,8 +2,8 @@
 //! often answers are ambiguous ([`activesense_lab::coverage`]), on generated plans or the
 //! user's rooms; prints one markdown row per rotation setting.
 
+use super::options::{parse_agent, EpisodeOptions};
 use activesense_core::episode::AgentKind;
-use activesense_instrument::episode::{parse_agent, parse_termination, Termination};
 use activesense_instrument::world::planfile::{self, PlanReadArgs};
 use activesense_instrument::world::plans::{TEST_SEEDS, TRAIN_SEEDS};
 use activesense_lab::coverage::{coverage, CoverageReport, CoverageRun};
@@ -28,15 +28,12 @@ pub struct AnswerCoverageArgs {
     /// Episodes per room with --plans-from.
     #[arg(long, default_value_t = 20)]
     episodes: u32,
-    /// Rotation-bin settings, comma-separated (1 = heading given, 10 = unknown).
-    #[arg(long, value_delimiter = ',', default_value = "1,10")]
-    rot_bins: Vec<u8>,
     /// The agent.
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
     agent: AgentKind,
-    /// When episodes stop: oracle, confident or action-limit.
-    #[arg(long, value_parser = parse_termination, default_value = "oracle")]
-    termination: Termination,
+    /// How the episodes are played (default: K = 1 and 10).
+    #[command(flatten)]
+    episode: EpisodeOptions,
     /// Give every episode a heading hint of its true heading plus OFFSET, ± TOL degrees
     /// ("OFFSET,TOL", e.g. "5,20"), to measure the tie-break.
     #[arg(long, value_parser = parse_offset_tol, allow_hyphen_values = true)]
@@ -69,7 +66,7 @@ pub fn run(a: AnswerCoverageArgs) -> Result<()> {
     println!(
         "answer coverage: agent {}, termination {}, {}",
         a.agent.name(),
-        a.termination.name(),
+        a.episode.termination.name(),
         if rooms.is_empty() {
             format!(
                 "{} {} plans from seed {first}",
@@ -81,17 +78,16 @@ pub fn run(a: AnswerCoverageArgs) -> Result<()> {
         }
     );
     println!("{}", CoverageReport::header());
-    for &k in &a.rot_bins {
-        if k != 1 && k != 10 {
-            anyhow::bail!("--rot-bins takes 1 and 10 (the paper's two settings), got {k}");
-        }
+    for k in a.episode.rot_bins_or(&[1, 10])? {
         let r = coverage(&CoverageRun {
             seeds: first..first.saturating_add(a.plans),
             rooms: rooms.clone(),
             episodes: a.episodes,
             rot_bins: k,
             agent: a.agent,
-            termination: a.termination,
+            termination: a.episode.termination,
+            config: a.episode.config(),
+            episode_seed: a.episode.episode_seed,
             hint: a.hint_offset_tol,
         });
         println!("{}", r.row());

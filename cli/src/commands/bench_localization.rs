@@ -1,6 +1,7 @@
 //! `activesense bench-localization`: the GHT localizer against the classical grid localizer
 //! (cost, memory, recognition), printed as markdown and optionally written as JSON.
 
+use super::options::RotBinsOption;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -13,9 +14,9 @@ pub struct BenchLocalizationArgs {
     /// Agent placements per plan and outlier rate.
     #[arg(long, default_value_t = 3)]
     trials: usize,
-    /// Rotation bins (1 = orientation known, 10 = paper default).
-    #[arg(long, default_value_t = 10)]
-    rot_bins: u8,
+    // --rot-bins (default here: 10).
+    #[command(flatten)]
+    rot_bins: RotBinsOption,
     /// Rotation hypotheses per bin.
     #[arg(long, default_value_t = 4)]
     sub_bins: u8,
@@ -31,9 +32,10 @@ pub fn run(a: BenchLocalizationArgs) -> Result<()> {
         trials_per_plan: a.trials,
         ..BenchOptions::default()
     };
-    opts.config.rot_bins = a.rot_bins;
+    let rot_bins = a.rot_bins.one(10)?;
+    opts.config.rot_bins = rot_bins;
     opts.config.sub_bins = a.sub_bins;
-    if a.rot_bins == 1 {
+    if rot_bins == 1 {
         opts.smear_sub_bins.clear();
     }
     let report = bl::run(&opts)?;

@@ -1,7 +1,8 @@
 //! `activesense bench-registration`: sparse-registration accuracy from coarse poses on the
 //! test plans, printed as a summary and optionally written as JSON.
 
-use super::{write_file, SensorArgs};
+use super::options::SensorArgs;
+use super::write_file;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;

@@ -1,8 +1,9 @@
 //! `activesense calibrate`: the options of the stop's calibration, parsed and checked; the
 //! fit itself is `activesense_lab::calibrate`.
 
+use super::options::{parse_agent, EpisodeOptions};
+use activesense_core::episode::Termination;
 use activesense_core::stop::AGENT_TABLES;
-use activesense_instrument::episode::parse_agent;
 use activesense_instrument::world::plans;
 use activesense_lab::calibrate::{calibrate, CalibrateOptions};
 use clap::Args;
@@ -10,14 +11,12 @@ use std::path::PathBuf;
 
 /// `activesense calibrate` arguments.
 #[derive(Args, Debug)]
+#[command(mut_arg("termination", |a| a.default_value("action-limit")))]
 pub struct CalibrateArgs {
     /// Agents whose episodes provide the samples (comma-separated; the learnt agent uses the
     /// committed policies).
     #[arg(long, default_value = "heuristic-1,learnt,blind-0,heuristic-0,oigm")]
     pub agents: String,
-    /// Rotation settings to fit (one model each).
-    #[arg(long, default_value = "1,10")]
-    pub rot_bins: String,
     /// Calibration plans per agent and setting (even-indexed ones fit, odd-indexed ones check).
     #[arg(long, default_value_t = 1000)]
     pub plans: u32,
@@ -25,12 +24,10 @@ pub struct CalibrateArgs {
     /// test and validation sets never draw from).
     #[arg(long, default_value_t = plans::CALIBRATION_SEEDS.start)]
     pub first_seed: u32,
-    /// Episode seed.
-    #[arg(long, default_value_t = 0)]
-    pub episode_seed: u64,
-    /// Action limit of the calibration episodes.
-    #[arg(long, default_value_t = 100)]
-    pub max_actions: u16,
+    /// How the calibration episodes are played: one model per rotation setting (default:
+    /// 1,10), run to the action limit.
+    #[command(flatten)]
+    pub episode: EpisodeOptions,
     /// Agents whose fitting episodes set the threshold table (the stated risk → threshold
     /// map, `StopModel::thresholds`; default: every agent of --agents). Each must be among
     /// --agents. Pooled by default: the table must not depend on a policy trained against
@@ -77,15 +74,9 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
         .split(',')
         .map(|s| parse_agent(s.trim()).map_err(anyhow::Error::msg))
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let rot_bins = a
-        .rot_bins
-        .split(',')
-        .map(|s| {
-            s.trim()
-                .parse::<u8>()
-                .map_err(|e| anyhow::anyhow!("--rot-bins '{s}': {e}"))
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    a.episode
+        .require_termination("calibrate", &[Termination::ActionLimit])?;
+    let rot_bins = a.episode.rot_bins_or(&[1, 10])?;
     let threshold_agents = a
         .threshold_agents
         .as_deref()
@@ -130,8 +121,8 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
         table_agents,
         plans: a.plans,
         first_seed: a.first_seed,
-        episode_seed: a.episode_seed,
-        max_actions: a.max_actions,
+        episode_seed: a.episode.episode_seed,
+        config: a.episode.config(),
         agent_table_plans: a.agent_table_plans,
         ridge: a.ridge,
         rust_out: a.rust_out,

@@ -1,18 +1,15 @@
 //! `activesense episode`: run one simulated episode with a baseline or the learnt agent and
 //! print its step log and outcome; optionally write the trajectory as JSON and an SVG.
 
-use super::{write_file, SensorArgs};
+use super::options::{parse_agent, EpisodeOptions, SensorArgs};
+use super::write_file;
 use activesense_core::episode::AgentKind;
-use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_instrument::answer::{parse_heading_hint, Answer, HeadingHint};
-use activesense_instrument::episode::{
-    parse_agent, parse_observability, parse_stop_risk, scan_string, termination_parser,
-    EpisodeSpec, Trajectory,
-};
+use activesense_instrument::episode::{scan_string, EpisodeSpec, Trajectory};
 use activesense_instrument::learn::agent::{run_agent_episode, Policies};
 use activesense_instrument::plot::svg::{self, Scene};
 use activesense_instrument::world::planfile::{self, PlanReadArgs};
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
 
@@ -27,17 +24,6 @@ pub struct EpisodeArgs {
     plan: Option<PathBuf>,
     #[command(flatten)]
     read: PlanReadArgs,
-    /// Stop only once the readings determine the pose: the smallest eigenvalue of their
-    /// normalised information matrix at the belief argmax must reach this (0 = off; the
-    /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
-    min_observability: f32,
-    /// With --termination confident: the risk of a wrong answer you accept. The stop answers
-    /// once the estimated probability that the registration is wrong falls below the
-    /// threshold that, on the calibration plans, made the first such stops wrong at most P of
-    /// the time (docs/EVALUATION.md, 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
-    stop_risk: f32,
     /// Agent: blind-0, blind-1, blind-2, heuristic-0, heuristic-1, heuristic-2, heuristic-3,
     /// learnt, learnt-int8, or the greedy benchmarks oigm, oigm-cost, eem (docs/BENCHMARKS.md).
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
@@ -48,24 +34,10 @@ pub struct EpisodeArgs {
     /// int8 blob for learnt-int8 (default: the one built into the firmware for this K).
     #[arg(long)]
     int8: Option<PathBuf>,
-    /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=10))]
-    rot_bins: u8,
-    /// Action limit (100 for evaluation, 500 for training).
-    #[arg(long, default_value_t = EVAL_MAX_ACTIONS, value_parser = clap::value_parser!(u16).range(1..))]
-    max_actions: u16,
-    /// Rotation steps per full turn (rotation step = 360° / this).
-    #[arg(long, default_value_t = DEFAULT_STEPS_PER_TURN, value_parser = clap::value_parser!(u16).range(2..=3600))]
-    steps_per_turn: u16,
-    /// Episode seed (placement, noise and agent randomness).
-    #[arg(long, default_value_t = 0)]
-    episode_seed: u64,
+    #[command(flatten)]
+    episode: EpisodeOptions,
     #[command(flatten)]
     sensor: SensorArgs,
-    /// When to stop: on coarse success against the ground truth (paper), by the calibrated
-    /// stop (no ground truth; answers with the refined pose), or only at the action limit.
-    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
-    termination: activesense_instrument::episode::Termination,
     /// Write the full trajectory as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -100,12 +72,7 @@ pub fn run(a: EpisodeArgs) -> Result<()> {
 
 /// The episode the options describe (a generated plan or the user's room).
 fn spec_of(a: &EpisodeArgs) -> Result<EpisodeSpec> {
-    if a.rot_bins != 1 && a.rot_bins != 10 {
-        bail!(
-            "--rot-bins must be 1 or 10 (the paper's two settings), got {}",
-            a.rot_bins
-        );
-    }
+    let rot_bins = a.episode.one_rot_bins(1)?;
     let user_plan = match &a.plan {
         Some(p) => {
             let rooms = planfile::rooms_for_command(Some(p), &[], &a.read)?;
@@ -119,18 +86,12 @@ fn spec_of(a: &EpisodeArgs) -> Result<EpisodeSpec> {
             None => a.seed.unwrap_or_default(),
         },
         user_plan,
-        episode_seed: a.episode_seed,
+        episode_seed: a.episode.episode_seed,
         agent: a.agent,
-        rot_bins: a.rot_bins,
-        config: EpisodeConfig {
-            steps_per_turn: a.steps_per_turn,
-            max_actions: a.max_actions,
-            min_observability: a.min_observability,
-            stop_risk: a.stop_risk,
-            ..Default::default()
-        },
+        rot_bins,
+        config: a.episode.config(),
         sensor: a.sensor.model()?,
-        termination: a.termination,
+        termination: a.episode.termination,
     })
 }
 

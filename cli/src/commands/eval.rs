@@ -2,12 +2,9 @@
 //! Table 4) and write results.json, results.md, timing.json and the charts; or, with
 //! `--extra-measurements`, the pose error past the minimal set.
 
-use super::{command_line, SensorArgs};
+use super::command_line;
+use super::options::{parse_agent, parse_stop_risk, parse_tolerance, EpisodeOptions, SensorArgs};
 use activesense_core::episode::AgentKind;
-use activesense_core::episode::{EpisodeConfig, EVAL_MAX_ACTIONS};
-use activesense_instrument::episode::{
-    parse_agent, parse_observability, parse_stop_risk, parse_tolerance, termination_parser,
-};
 use activesense_instrument::learn::agent::Policies;
 use activesense_instrument::world::planfile::{self, PlanReadArgs};
 use activesense_instrument::world::plans;
@@ -30,9 +27,6 @@ pub struct EvalArgs {
     /// default: the blobs built into the firmware (policies/k{K}/policy.q8).
     #[arg(long)]
     int8: Vec<PathBuf>,
-    /// Comma-separated rotation settings: 1 (heading known) and/or 10.
-    #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
-    rot_bins: Vec<u8>,
     /// Number of test plans (generated; see --plan / --plans-from for your own).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u32).range(1..))]
     plans: u32,
@@ -49,17 +43,8 @@ pub struct EvalArgs {
     /// First plan seed (the test set is 1000000..1001000).
     #[arg(long, default_value_t = plans::TEST_SEEDS.start)]
     first_seed: u32,
-    /// Episode seed (placement and noise also depend on the plan seed).
-    #[arg(long, default_value_t = 0)]
-    episode_seed: u64,
-    /// Action limit per episode.
-    #[arg(long, default_value_t = EVAL_MAX_ACTIONS, value_parser = clap::value_parser!(u16).range(1..))]
-    max_actions: u16,
-    /// When an episode stops: coarse success against the ground truth (the paper), or the
-    /// calibrated stop (no ground truth; it answers with the refined pose, and recognition
-    /// scores the cell that pose lies in), or only the action limit.
-    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
-    termination: activesense_instrument::episode::Termination,
+    #[command(flatten)]
+    episode: EpisodeOptions,
     #[command(flatten)]
     sensor: SensorArgs,
     /// Worker threads (default: all cores).
@@ -80,17 +65,6 @@ pub struct EvalArgs {
     /// extra.svg; episodes run to --max-actions, so give room, e.g. --max-actions 300).
     #[arg(long)]
     extra_measurements: Option<usize>,
-    /// Stop only once the readings determine the pose: the smallest eigenvalue of their
-    /// normalised information matrix at the belief argmax must reach this (0 = off; the
-    /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
-    min_observability: f32,
-    /// With --termination confident: the risk of a wrong answer you accept. The stop answers
-    /// once the estimated probability that the registration is wrong falls below the
-    /// threshold that, on the calibration plans, made the first such stops wrong at most P of
-    /// the time (docs/EVALUATION.md, 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
-    stop_risk: f32,
     /// When an answer is right: position error in metres and heading error in degrees,
     /// modulo the room's symmetry (results.json `right`, `wrong_of_answered`; the
     /// no-oracle table).
@@ -134,13 +108,9 @@ fn parse_agents(s: &str) -> Result<AgentList, String> {
 pub fn run(a: EvalArgs) -> Result<()> {
     use activesense_lab::eval::{experiments, harness, report};
     use std::io::IsTerminal;
-    if let Some(bad) = a.rot_bins.iter().find(|k| **k != 1 && **k != 10) {
-        bail!("--rot-bins takes 1 and/or 10 (the paper's two settings), got {bad}");
-    }
+    let rot_bins = a.episode.rot_bins_or(&[1, 10])?;
     // Fail now, not after the whole run, when the results cannot be written.
     super::ensure_writable_dir(&a.out)?;
-    let mut rot_bins = a.rot_bins.clone();
-    rot_bins.dedup();
     super::set_threads(a.threads)?;
     let rooms = planfile::rooms_for_command(a.plan.as_deref(), &a.plans_from, &a.read)?;
     let (user_plans, refused) = rooms.unwrap_or_default();
@@ -155,15 +125,10 @@ pub fn run(a: EvalArgs) -> Result<()> {
         user_plans,
         refused_plans: refused.iter().map(|e| e.to_string()).collect(),
         first_seed: a.first_seed,
-        episode_seed: a.episode_seed,
-        config: EpisodeConfig {
-            max_actions: a.max_actions,
-            min_observability: a.min_observability,
-            stop_risk: a.stop_risk,
-            ..Default::default()
-        },
+        episode_seed: a.episode.episode_seed,
+        config: a.episode.config(),
         sensor: a.sensor.model()?,
-        termination: a.termination,
+        termination: a.episode.termination,
         policy_files: Vec::new(),
         policies: Policies::default(),
         progress: !a.no_progress && std::io::stderr().is_terminal(),

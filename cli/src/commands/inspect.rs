@@ -1,6 +1,7 @@
 //! `activesense inspect`: one trajectory's page, or (`--aggregate`) the Fig.-4 analysis over
 //! many episodes (the tool itself is `activesense_lab::inspect`).
 
+use super::options::{EpisodeOption, EpisodeOptions};
 use activesense_instrument::learn::agent::LearntPolicy;
 use activesense_lab::inspect::{aggregate, write_page};
 use anyhow::{bail, Result};
@@ -19,17 +20,14 @@ pub struct InspectArgs {
     #[arg(long)]
     pub aggregate: bool,
     /// Agent of the aggregate episodes (only the learnt float policy has maps).
-    #[arg(long, value_parser = activesense_instrument::episode::parse_agent, default_value = "learnt")]
+    #[arg(long, value_parser = super::options::parse_agent, default_value = "learnt")]
     pub agent: activesense_core::episode::AgentKind,
     /// Test plans of the aggregate (seeds from 1000000 on).
     #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub plans: u32,
-    /// Rotation bins of the aggregate episodes: 1 or 10.
-    #[arg(long, default_value_t = 1)]
-    pub rot_bins: u8,
-    /// Episode seed of the aggregate episodes.
-    #[arg(long, default_value_t = 0)]
-    pub episode_seed: u64,
+    /// The aggregate's episodes: --rot-bins (default 1) and --episode-seed.
+    #[command(flatten)]
+    pub episode: EpisodeOptions,
     /// Float policy file for the aggregate (default: the committed policies/k{K}/policy.policy).
     #[arg(long)]
     pub policy: Option<std::path::PathBuf>,
@@ -61,18 +59,27 @@ pub fn cmd_inspect(a: InspectArgs, command: &str) -> Result<()> {
             a.agent.name()
         );
     }
-    if a.rot_bins != 1 && a.rot_bins != 10 {
-        bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
-    }
+    let rot_bins = a.episode.one_rot_bins(1)?;
+    a.episode.refuse(
+        "inspect --aggregate",
+        &[
+            EpisodeOption::MaxActions,
+            EpisodeOption::StepsPerTurn,
+            EpisodeOption::StopRisk,
+            EpisodeOption::MinObservability,
+            EpisodeOption::Termination,
+        ],
+        "the Fig.-4 aggregate plays the paper's evaluation episodes",
+    )?;
     let path = a
         .policy
         .clone()
-        .unwrap_or_else(|| activesense_instrument::learn::agent::default_policy_path(a.rot_bins));
-    let policy = LearntPolicy::load(&path, a.rot_bins)?;
+        .unwrap_or_else(|| activesense_instrument::learn::agent::default_policy_path(rot_bins));
+    let policy = LearntPolicy::load(&path, rot_bins)?;
     let opts = aggregate::AggregateOptions {
         plans: a.plans,
-        episode_seed: a.episode_seed,
-        rot_bins: a.rot_bins,
+        episode_seed: a.episode.episode_seed,
+        rot_bins,
         progress: !a.no_progress && std::io::stderr().is_terminal(),
         ..Default::default()
     };

@@ -4,10 +4,10 @@
 //! are met (README, "Instructions per update"). Split from [`super::remote`], whose episode
 //! runner it drives.
 
-use super::remote::{spec_for, RemoteEpisodeArgs};
-use activesense_core::episode::{AgentKind, EVAL_MAX_ACTIONS};
+use super::options::{parse_agent, EpisodeOptions};
+use super::remote::spec_for;
+use activesense_core::episode::AgentKind;
 use activesense_core::protocol::UpdateStats;
-use activesense_instrument::episode::{parse_agent, termination_parser};
 use activesense_instrument::link::device::sim_episode;
 use activesense_instrument::link::runner::run_one;
 use activesense_instrument::link::serial::{self, LinkSpec};
@@ -33,12 +33,9 @@ pub struct McuBenchArgs {
     /// counts the int8 network).
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
     pub agent: AgentKind,
-    /// Episode seed (placement, noise and agent randomness).
-    #[arg(long, default_value_t = 0)]
-    pub episode_seed: u64,
-    /// When the device stops an episode (see `sim --termination`).
-    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
-    pub termination: activesense_core::episode::Termination,
+    /// How the episodes are played (default: K = 1 and 10).
+    #[command(flatten)]
+    pub options: EpisodeOptions,
     /// Reply timeout in milliseconds.
     #[arg(long, default_value_t = 60_000)]
     pub timeout_ms: u64,
@@ -138,28 +135,14 @@ pub fn mcu_bench(a: &McuBenchArgs) -> Result<Vec<McuBenchRow>> {
         bail!("the firmware reports no cycle counts");
     }
     let mut rows = Vec::new();
-    for rot_bins in [1u8, 10] {
-        let ep = RemoteEpisodeArgs {
-            episodes: a.episodes,
-            agent: a.agent,
-            rot_bins,
-            max_actions: EVAL_MAX_ACTIONS,
-            episode_seed: a.episode_seed,
-            termination: a.termination,
-            stop_risk: activesense_core::limits::DEFAULT_STOP_RISK,
-            min_observability: 0.0,
-            timeout_ms: Some(a.timeout_ms),
-            verify: false,
-            shutdown: false,
-            heading_hint: None,
-        };
+    for rot_bins in a.options.rot_bins_or(&[1, 10])? {
         let mut row = McuBenchRow {
             rot_bins,
             ..Default::default()
         };
         for i in 0..a.episodes {
             let seed = a.first_seed.wrapping_add(i);
-            let spec = spec_for(seed, &ep)?;
+            let spec = spec_for(seed, a.agent, rot_bins, &a.options)?;
             let mut restarts = 0;
             let run = run_one(&mut link, &|| sim_episode(&spec), false, &mut restarts)
                 .with_context(|| format!("K = {rot_bins}, episode on plan {seed}"))?;
@@ -280,10 +263,10 @@ pub fn cmd_mcu_bench(a: McuBenchArgs) -> Result<()> {
          guest instruction), agent {:?}, termination {:?}, plan seeds {}..{}, episode seed {}\n",
         a.elf.display(),
         a.agent,
-        a.termination,
+        a.options.termination,
         a.first_seed,
         a.first_seed.wrapping_add(a.episodes),
-        a.episode_seed
+        a.options.episode_seed
     );
     print!("{}", mcu_bench_table(&rows));
     print!("\n{}", mcu_bench_targets(&rows));

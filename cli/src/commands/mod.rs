@@ -1,7 +1,7 @@
 //! The bodies of the `activesense` commands, one module per command; `src/main.rs` holds
-//! only the clap tree and dispatches here. The options several commands share (the sensor
-//! model) and the small helpers they all use (writing a file, the command line as typed)
-//! live in this module.
+//! only the clap tree and dispatches here. The options several commands share are declared
+//! once in [`options`]; the small helpers they all use (writing a file, the command line as
+//! typed) live in this module.
 
 pub mod answer_coverage;
 pub mod bench_localization;
@@ -12,54 +12,15 @@ pub mod episode;
 pub mod eval;
 pub mod inspect;
 pub mod mcu_bench;
+pub mod options;
 pub mod plan;
 pub mod policy;
 pub mod remote;
 pub mod station;
 pub mod train;
 
-use activesense_instrument::world::sensor::SensorModel;
 use anyhow::{Context, Result};
-use clap::Args;
 use std::path::Path;
-
-/// Sensor options shared by every simulating command.
-#[derive(Args, Clone)]
-pub(crate) struct SensorArgs {
-    /// EDM range noise, standard deviation in metres.
-    #[arg(long, default_value_t = 0.01)]
-    sigma: f32,
-    /// Probability that a measurement is an outlier (uniform random range).
-    #[arg(long, default_value_t = 0.05)]
-    outliers: f32,
-    /// No EDM return beyond this range (m).
-    #[arg(long, default_value_t = 50.0)]
-    max_range: f32,
-    /// No EDM return beyond this incidence angle from the wall normal (degrees).
-    #[arg(long, default_value_t = 75.0)]
-    max_incidence_deg: f32,
-    /// Topological scan false-negative rate per pixel.
-    #[arg(long, default_value_t = 0.0)]
-    scan_fn: f32,
-    /// Topological scan false-positive rate per pixel.
-    #[arg(long, default_value_t = 0.0)]
-    scan_fp: f32,
-}
-
-impl SensorArgs {
-    pub(crate) fn model(&self) -> Result<SensorModel> {
-        let m = SensorModel {
-            sigma: self.sigma,
-            outlier_prob: self.outliers,
-            max_range: self.max_range,
-            max_incidence: self.max_incidence_deg.to_radians(),
-            scan_false_negative: self.scan_fn,
-            scan_false_positive: self.scan_fp,
-        };
-        m.validate().map_err(anyhow::Error::msg)?;
-        Ok(m)
-    }
-}
 
 pub(crate) fn write_file(path: &Path, contents: &str) -> Result<()> {
     std::fs::write(path, contents).with_context(|| format!("cannot write {}", path.display()))

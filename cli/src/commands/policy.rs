@@ -2,6 +2,7 @@
 //! float-vs-int8 agreement on the test plans (`agreement`), and, over a link to an
 //! instrument, uploading an int8 policy (`upload`) and asking which one serves (`info`).
 
+use super::options::RotBinsOption;
 use super::write_file;
 use activesense_instrument::learn::agent::Policies;
 use activesense_instrument::link::runner::open_link;
@@ -28,9 +29,9 @@ pub struct QuantizeArgs {
 
 #[derive(Args)]
 pub struct AgreementArgs {
-    /// Comma-separated rotation settings.
-    #[arg(long, default_value = "1,10", value_delimiter = ',', value_parser = clap::value_parser!(u8).range(1..=10))]
-    rot_bins: Vec<u8>,
+    // --rot-bins (default here: 1,10); the episodes are the evaluation's defaults.
+    #[command(flatten)]
+    rot_bins: RotBinsOption,
     /// Test plans per setting (seeds from 1000000 on).
     #[arg(long, default_value_t = 200)]
     plans: usize,
@@ -90,8 +91,7 @@ fn read_blob(path: &Path) -> Result<(u8, Vec<u8>)> {
 
 pub fn agreement(a: AgreementArgs) -> Result<()> {
     use activesense_lab::learn::quantize;
-    let mut rot_bins = a.rot_bins.clone();
-    rot_bins.dedup();
+    let rot_bins = a.rot_bins.list(&[1, 10])?;
     let policies = Policies::load(&a.policy, &rot_bins)?;
     let mut blobs = Vec::new();
     for path in &a.int8 {

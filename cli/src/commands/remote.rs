@@ -8,18 +8,13 @@
 //! additionally replays each episode in-process ([`activesense_core::device::instrument::run_local`])
 //! and fails unless actions, observations and report are bit-identical.
 
+use super::options::{parse_agent, EpisodeOptions};
 use activesense_core::episode::AgentKind;
-use activesense_core::episode::{EpisodeConfig, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
 use activesense_core::protocol::{EpisodeParams, EpisodeReport, UpdateStats};
 use activesense_core::FloorPlan;
-use activesense_instrument::episode::{
-    parse_agent, parse_observability, parse_stop_risk, termination_parser, EpisodeSpec,
-};
+use activesense_instrument::episode::EpisodeSpec;
 use activesense_instrument::link::device::{sim_episode, SimInstrument};
-use activesense_instrument::link::runner::{end_session, open_link, print_link_counters};
-pub use activesense_instrument::link::runner::{
-    reference_run, restartable, run_one, same_run, EpisodeMaker, MAX_RESTARTS,
-};
+use activesense_instrument::link::runner::{end_session, open_link, print_link_counters, run_one};
 use activesense_instrument::link::serial::{self, EpisodeRun, LinkSpec};
 use activesense_instrument::world::plans::TEST_SEEDS;
 use activesense_instrument::world::sensor::SensorModel;
@@ -39,29 +34,10 @@ pub struct RemoteEpisodeArgs {
     /// instrument carries, or one uploaded with `activesense policy upload`).
     #[arg(long, value_parser = parse_agent, default_value = "heuristic-1")]
     pub agent: AgentKind,
-    /// Rotation bins: 1 = heading known (sent to the device), 10 = unknown.
-    #[arg(long, default_value_t = 1)]
-    pub rot_bins: u8,
-    /// Action limit per episode.
-    #[arg(long, default_value_t = EVAL_MAX_ACTIONS)]
-    pub max_actions: u16,
-    /// Episode seed (placement, noise and agent randomness).
-    #[arg(long, default_value_t = 0)]
-    pub episode_seed: u64,
-    /// When the device stops an episode: on coarse success against the simulated ground
-    /// truth (oracle, the paper's rule), when its belief is confident, or at the action limit.
-    #[arg(long, value_parser = termination_parser(), default_value = "oracle")]
-    pub termination: activesense_core::episode::Termination,
-    /// With --termination confident: stop only once the estimated probability that the
-    /// registration is wrong is below P (calibrated on training plans; docs/EVALUATION.md,
-    /// 'Calibrated stop'). The instrument applies the same rule.
-    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk, allow_negative_numbers = true)]
-    pub stop_risk: f32,
-    /// Stop only once the readings determine the pose: the smallest eigenvalue of their
-    /// normalised information matrix at the belief argmax must reach this (0 = off; sent
-    /// to the instrument, which applies it; docs/EVALUATION.md, "Observability").
-    #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
-    pub min_observability: f32,
+    /// How the episodes are played (the rotation setting, limit and stop are sent to the
+    /// device).
+    #[command(flatten)]
+    pub options: EpisodeOptions,
     /// Reply time-out in milliseconds. Default: what the device announces as its slowest
     /// reply (its `Hello`), plus half again; a request without a reply in time is re-sent.
     #[arg(long)]
@@ -165,39 +141,34 @@ pub struct SerialRunArgs {
     pub episode: RemoteEpisodeArgs,
 }
 
-pub(super) fn spec_for(plan_seed: u32, a: &RemoteEpisodeArgs) -> Result<EpisodeSpec> {
-    if a.rot_bins != 1 && a.rot_bins != 10 {
-        bail!("--rot-bins must be 1 or 10, got {}", a.rot_bins);
-    }
-    if a.agent.is_greedy() {
+/// The episode on plan `plan_seed` that `agent` plays on a device with rotation setting
+/// `rot_bins`.
+pub(super) fn spec_for(
+    plan_seed: u32,
+    agent: AgentKind,
+    rot_bins: u8,
+    o: &EpisodeOptions,
+) -> Result<EpisodeSpec> {
+    if agent.is_greedy() {
         bail!(
             "{} is a host-side benchmark (paper §4.3): OIGM needs the ground truth and EEM ray-casts {} belief hypotheses per bearing, so the instrument does not run them; use `activesense episode` or `activesense eval --agents {}`",
-            a.agent.name(),
+            agent.name(),
             activesense_instrument::baselines::greedy::EEM_PARTICLES,
-            a.agent.name()
+            agent.name()
         );
     }
-    Ok(EpisodeSpec {
-        plan_seed,
-        episode_seed: a.episode_seed,
-        // The instrument runs the learnt policy in its int8 form: that is what `learnt`
-        // means on a device (the float network exists only on the host).
-        agent: match a.agent {
-            AgentKind::Learnt => AgentKind::LearntInt8,
-            other => other,
-        },
-        rot_bins: a.rot_bins,
-        config: EpisodeConfig {
-            steps_per_turn: DEFAULT_STEPS_PER_TURN,
-            max_actions: a.max_actions,
-            min_observability: a.min_observability,
-            stop_risk: a.stop_risk,
-            ..Default::default()
-        },
-        sensor: SensorModel::default(),
-        termination: a.termination,
-        user_plan: None,
-    })
+    // The instrument runs the learnt policy in its int8 form: that is what `learnt` means
+    // on a device (the float network exists only on the host).
+    let agent = match agent {
+        AgentKind::Learnt => AgentKind::LearntInt8,
+        other => other,
+    };
+    let mut spec = EpisodeSpec::new(plan_seed, agent);
+    spec.episode_seed = o.episode_seed;
+    spec.rot_bins = rot_bins;
+    spec.config = o.config();
+    spec.termination = o.termination;
+    Ok(spec)
 }
 
 #[derive(Default)]
@@ -361,19 +332,24 @@ pub fn cmd_sim(a: SimArgs) -> Result<()> {
     )?;
     // Generated plans: one episode per plan seed. The user's rooms: `--episodes` episodes in
     // each, episode seeds episode-seed, episode-seed + 1, ...
+    let k = a.episode.options.one_rot_bins(1)?;
+    let ep = &a.episode;
     let specs: Vec<(String, EpisodeSpec)> = match &rooms {
         None => (0..a.episode.episodes)
             .map(|i| {
                 let seed = a.first_seed.wrapping_add(i);
-                Ok((format!("plan {seed}"), spec_for(seed, &a.episode)?))
+                Ok((
+                    format!("plan {seed}"),
+                    spec_for(seed, ep.agent, k, &ep.options)?,
+                ))
             })
             .collect::<Result<_>>()?,
         Some((rooms, _)) => {
             let mut v = Vec::new();
             for room in rooms {
                 for i in 0..a.episode.episodes {
-                    let mut spec = spec_for(room.seed(), &a.episode)?;
-                    spec.episode_seed = a.episode.episode_seed.wrapping_add(i as u64);
+                    let mut spec = spec_for(room.seed(), ep.agent, k, &ep.options)?;
+                    spec.episode_seed = ep.options.episode_seed.wrapping_add(i as u64);
                     spec.user_plan = Some(room.clone());
                     v.push((format!("{} episode {i}", room.name), spec));
                 }
@@ -479,7 +455,12 @@ pub fn cmd_serial(a: SerialArgs) -> Result<()> {
             let start = Instant::now();
             let mut restarts = 0;
             for i in 0..r.episode.episodes {
-                let spec = spec_for(0, &r.episode)?;
+                let spec = spec_for(
+                    0,
+                    r.episode.agent,
+                    r.episode.options.one_rot_bins(1)?,
+                    &r.episode.options,
+                )?;
                 let world_seed = spec.world_seed() ^ i as u64;
                 let mk = || {
                     let mut world =

@@ -2,13 +2,12 @@
 //! and `activesense geocom-sim` (the GeoCOM instrument simulator to try it against).
 //! `docs/GEOCOM.md` describes the protocol, the RPCs and the fault handling.
 
-use super::SensorArgs;
-use activesense_core::episode::{Action, AgentKind, EpisodeConfig};
-use activesense_core::episode::{DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS};
+use super::options::{parse_agent, EpisodeOption, EpisodeOptions, SensorArgs};
+use activesense_core::episode::{Action, AgentKind, Termination};
 use activesense_core::pipeline::Stop;
 use activesense_core::registration::Measurement;
 use activesense_instrument::answer::{Answer, AnswerInput, HeadingHint};
-use activesense_instrument::episode::{parse_agent, parse_stop_risk, EpisodeSpec};
+use activesense_instrument::episode::EpisodeSpec;
 use activesense_instrument::geocom::client::{
     Client, ClientConfig, SerialTransport, TcpTransport, Transport, DEFAULT_BAUD,
 };
@@ -81,6 +80,7 @@ impl GeoComLink {
 
 /// `activesense station`.
 #[derive(Args, Debug)]
+#[command(mut_arg("termination", |a| a.default_value("confident")))]
 pub struct StationArgs {
     // clap's help text: the brackets are an optional part, not a rustdoc link.
     #[allow(rustdoc::broken_intra_doc_links)]
@@ -103,19 +103,11 @@ pub struct StationArgs {
     /// int8 blob for learnt-int8 (default: the firmware's for K = 10).
     #[arg(long)]
     pub int8: Option<PathBuf>,
-    /// The risk of a wrong answer you accept: stop once the calibrated P(wrong registration)
-    /// is below the threshold calibrated for P (docs/EVALUATION.md, 'Calibrated stop').
-    #[arg(long, default_value_t = activesense_core::limits::DEFAULT_STOP_RISK, value_parser = parse_stop_risk)]
-    pub stop_risk: f32,
-    /// Action limit.
-    #[arg(long, default_value_t = EVAL_MAX_ACTIONS)]
-    pub max_actions: u16,
-    /// Rotation steps per turn (the encoder grid the telescope is positioned on).
-    #[arg(long, default_value_t = DEFAULT_STEPS_PER_TURN)]
-    pub steps_per_turn: u16,
-    /// Episode seed (the agent's and the registration's randomness).
-    #[arg(long, default_value_t = 0)]
-    pub episode_seed: u64,
+    /// How the station plays its episode: heading unknown (--rot-bins 10) and the
+    /// calibrated stop (--termination confident), both the defaults here; --stop-risk is the
+    /// risk of a wrong answer you accept (docs/EVALUATION.md, 'Calibrated stop').
+    #[command(flatten)]
+    pub episode: EpisodeOptions,
     /// Zenith angle to measure at, degrees (default 90: telescope level).
     #[arg(long)]
     pub vertical_deg: Option<f64>,
@@ -346,14 +338,14 @@ fn live(s: &SessionStep) {
 pub fn setup_of(a: &StationArgs) -> Result<(String, SessionSetup, Policies)> {
     let loaded = planfile::load_plan(&a.plan, &a.read.options())?;
     let named = loaded.plan;
+    if a.episode.one_rot_bins(ROT_BINS)? != ROT_BINS {
+        bail!("a station does not know its heading: it localizes with --rot-bins {ROT_BINS}");
+    }
+    a.episode
+        .require_termination("station", &[Termination::Confident])?;
     let mut spec = EpisodeSpec::new(named.seed(), a.agent);
-    spec.episode_seed = a.episode_seed;
-    let config = EpisodeConfig {
-        steps_per_turn: a.steps_per_turn,
-        max_actions: a.max_actions,
-        stop_risk: a.stop_risk,
-        ..Default::default()
-    };
+    spec.episode_seed = a.episode.episode_seed;
+    let config = a.episode.config();
     let mut policies = Policies::default();
     match a.agent {
         AgentKind::Learnt => policies = Policies::load(a.policy.as_slice(), &[ROT_BINS])?,
@@ -428,7 +420,7 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
     println!("{}", answer.to_text());
     report.print();
     let written = if a.set_station {
-        Some(report.write_to_instrument(inst.client(), &frame, a.tie_break, a.stop_risk))
+        Some(report.write_to_instrument(inst.client(), &frame, a.tie_break, a.episode.stop_risk))
     } else {
         None
     };
@@ -483,12 +475,11 @@ pub struct GeocomSimArgs {
     /// Serve on a new pseudo-terminal (its path is printed; use geocom:serial:PATH).
     #[arg(long)]
     pub pty: bool,
-    /// Episode seed (with the room's name: where the instrument stands, the noise).
-    #[arg(long, default_value_t = 0)]
-    pub episode_seed: u64,
-    /// Rotation steps per turn of the encoder grid the station command uses.
-    #[arg(long, default_value_t = DEFAULT_STEPS_PER_TURN)]
-    pub steps_per_turn: u16,
+    /// The episode seed (with the room's name: where the instrument stands, the noise) and
+    /// the encoder grid the station command uses (--steps-per-turn); the station decides
+    /// the rest.
+    #[command(flatten)]
+    pub episode: EpisodeOptions,
     /// Motor speed, degrees per second (0: instant).
     #[arg(long, default_value_t = 90.0)]
     pub motor_deg_per_s: f64,
@@ -506,15 +497,23 @@ pub struct GeocomSimArgs {
 /// The simulator for `a` (the tests build it the same way).
 pub fn sim_of(a: &GeocomSimArgs) -> Result<(String, GeoComSim)> {
     let named = planfile::load_plan(&a.plan, &a.read.options())?.plan;
+    a.episode.refuse(
+        "geocom-sim",
+        &[
+            EpisodeOption::RotBins,
+            EpisodeOption::MaxActions,
+            EpisodeOption::StopRisk,
+            EpisodeOption::MinObservability,
+            EpisodeOption::Termination,
+        ],
+        "the simulator plays the room; `station` decides where to measure and when to stop",
+    )?;
     let mut spec = EpisodeSpec::new(named.seed(), AgentKind::Heuristic1);
-    spec.episode_seed = a.episode_seed;
+    spec.episode_seed = a.episode.episode_seed;
     let cfg = SimConfig {
         plan: named.plan.clone(),
         sensor: a.sensor.model()?,
-        config: EpisodeConfig {
-            steps_per_turn: a.steps_per_turn,
-            ..Default::default()
-        },
+        config: a.episode.config(),
         world_seed: spec.world_seed(),
         motor_speed: a.motor_deg_per_s.max(0.0).to_radians(),
         edm_time: Duration::from_millis(a.edm_ms),

@@ -2,16 +2,24 @@
 //! and write the policy file, its learning curve and logs.
 
 use super::command_line;
+use super::options::{EpisodeOption, EpisodeOptions};
+use activesense_core::episode::Termination;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
 
 #[derive(Args)]
 pub struct TrainArgs {
-    // Every hyper-parameter flag (--rot-bins, --updates, --seed, --envs, ...): their
-    // defaults and help are written once, in HyperParams.
+    // Every hyper-parameter flag (--updates, --seed, --envs, ...): their defaults and help
+    // are written once, in HyperParams.
     #[command(flatten)]
     hp: activesense_lab::learn::train::HyperParams,
+    /// The training episodes: --rot-bins (required), --termination (oracle, the paper's, or
+    /// confident: the calibrated stop an instrument uses; the answer is then rewarded +1
+    /// when right within the surveyor's tolerance and −--wrong-penalty when wrong) and
+    /// --max-actions.
+    #[command(flatten)]
+    episode: EpisodeOptions,
     /// Stop after this many minutes of wall time even if --updates is not reached (the
     /// result then depends on the machine's speed; --updates alone is reproducible).
     #[arg(long)]
@@ -35,14 +43,26 @@ pub fn run(a: TrainArgs) -> Result<()> {
     use activesense_instrument::learn::{agent::shape_for, file};
     use activesense_lab::learn::train;
     use std::io::IsTerminal;
-    if a.hp.rot_bins != 1 && a.hp.rot_bins != 10 {
-        bail!(
-            "--rot-bins must be 1 or 10 (the paper's two settings), got {}",
-            a.hp.rot_bins
-        );
+    if a.episode.rot_bins.rot_bins.is_empty() {
+        bail!("give the rotation setting to train for: --rot-bins 1 or 10");
     }
+    a.episode
+        .require_termination("train", &[Termination::Oracle, Termination::Confident])?;
+    a.episode.refuse(
+        "train",
+        &[
+            EpisodeOption::EpisodeSeed,
+            EpisodeOption::StepsPerTurn,
+            EpisodeOption::StopRisk,
+            EpisodeOption::MinObservability,
+        ],
+        "a training run draws its episodes from --seed and plays them on the evaluation's encoder grid with the default stop",
+    )?;
     super::set_threads(a.threads)?;
-    let hp = a.hp;
+    let mut hp = a.hp;
+    hp.rot_bins = a.episode.one_rot_bins(1)?;
+    hp.termination = a.episode.termination;
+    hp.max_actions = a.episode.max_actions;
     let init = match &a.init {
         Some(p) => Some(file::load_expecting(p, hp.rot_bins, shape_for(hp.rot_bins).side)?.0),
         None => None,

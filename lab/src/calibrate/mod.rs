@@ -50,8 +50,8 @@ pub struct CalibrateOptions {
     pub first_seed: u32,
     /// Episode seed.
     pub episode_seed: u64,
-    /// Action limit of the calibration episodes.
-    pub max_actions: u16,
+    /// The calibration episodes' configuration (they run to its action limit).
+    pub config: EpisodeConfig,
     /// Calibration plans per setting for the agents of `table_agents`.
     pub agent_table_plans: u32,
     /// Ridge (L2) penalty on the weights.
@@ -403,7 +403,7 @@ pub fn rust_source(fitted: &[Fitted], command: &str) -> String {
     s.push_str(command);
     s.push_str("`; do not edit by hand\n");
     s.push_str("//! (the held-out check is in `results/calibration/calibration.md`).\n\n");
-    s.push_str("use activesense_instrument::episode::AgentKind;\nuse crate::stop::{AgentTable, StopModel};\n\n");
+    s.push_str("use crate::episode::AgentKind;\nuse crate::stop::{AgentTable, StopModel};\n\n");
     s.push_str("/// One model per fitted rotation setting.\npub const MODELS: &[StopModel] = &[\n");
     for f in fitted {
         // One weight a line, as rustfmt lays the array out: the generated file is the
@@ -523,10 +523,7 @@ pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
         plans: a.plans,
         first_seed: a.first_seed,
         episode_seed: a.episode_seed,
-        config: EpisodeConfig {
-            max_actions: a.max_actions,
-            ..EpisodeConfig::default()
-        },
+        config: a.config,
         sensor: Default::default(),
         termination: Termination::ActionLimit,
         policy_files: Vec::new(),

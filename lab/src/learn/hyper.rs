@@ -12,12 +12,13 @@ use clap::{Args, FromArgMatches};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 
-/// Every hyper-parameter of a training run. The first seventeen are `activesense train` flags
+/// Every hyper-parameter of a training run. The flags are `activesense train`'s
 /// (doc comment = help text); the others are fixed.
 #[derive(Args, Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct HyperParams {
-    /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown.
-    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=10))]
+    /// Rotation bins of the localizer: 1 = heading known, 10 = heading unknown (set from
+    /// the command's episode options, `--rot-bins`).
+    #[arg(skip = 1u8)]
     pub rot_bins: u8,
     /// Number of updates (each: --envs environments × --segment steps, one gradient step).
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..))]
@@ -89,7 +90,8 @@ pub struct HyperParams {
     /// What ends a training episode: `oracle` (the paper's: the first coarse success) or
     /// `confident` (the calibrated stop an instrument uses; the answer is then rewarded
     /// +1 when right within the surveyor's tolerance and −`--wrong-penalty` when wrong).
-    #[arg(long, default_value = "oracle", value_parser = parse_termination)]
+    /// Set from the command's episode options (`--termination`).
+    #[arg(skip = Termination::Oracle)]
     #[serde(default = "oracle")]
     pub termination: Termination,
     /// Reward: −this for a wrong answer under `--termination confident` (W of the
@@ -166,17 +168,6 @@ fn default_wrong_penalty() -> f32 {
     2.0
 }
 
-/// The episode's termination parser, less `action-limit` (an episode that never stops
-/// teaches no stop).
-fn parse_termination(s: &str) -> Result<Termination, String> {
-    match activesense_instrument::episode::parse_termination(s)? {
-        Termination::ActionLimit => {
-            Err("a training episode ends by `oracle` or `confident`, not `action-limit`".into())
-        }
-        t => Ok(t),
-    }
-}
-
 /// A reward weight: a finite number, not negative (a negative penalty would reward gross
 /// registrations).
 fn parse_non_negative(s: &str) -> Result<f32, String> {
@@ -199,7 +190,7 @@ impl HyperParams {
     pub fn defaults(rot_bins: u8) -> Self {
         let cmd = Self::augment_args(clap::Command::new("hyper-params").no_binary_name(true));
         let m = cmd
-            .try_get_matches_from(["--rot-bins", "1"])
+            .try_get_matches_from(std::iter::empty::<&str>())
             .expect("the defaults parse");
         HyperParams {
             rot_bins,
@@ -282,22 +273,18 @@ mod tests {
     fn flags_override_and_fixed_fields_stay() {
         let cmd = HyperParams::augment_args(clap::Command::new("t").no_binary_name(true));
         let m = cmd
-            .try_get_matches_from(["--rot-bins", "10", "--envs", "4", "--lr", "1e-4"])
+            .try_get_matches_from(["--envs", "4", "--lr", "1e-4"])
             .unwrap();
         let hp = HyperParams::from_arg_matches(&m).unwrap();
         assert_eq!(hp.num_envs, 4);
         assert_eq!(hp.learning_rate, 1e-4);
         assert_eq!(hp.gamma, 0.99);
         let cmd = HyperParams::augment_args(clap::Command::new("t").no_binary_name(true));
-        assert!(cmd
-            .try_get_matches_from(["--rot-bins", "1", "--envs", "0"])
-            .is_err());
+        assert!(cmd.try_get_matches_from(["--envs", "0"]).is_err());
         for bad in ["-0.5", "NaN", "inf", "half"] {
             let cmd = HyperParams::augment_args(clap::Command::new("t").no_binary_name(true));
             let flag = format!("--registration-penalty={bad}");
-            let e = cmd
-                .try_get_matches_from(["--rot-bins", "1", flag.as_str()])
-                .unwrap_err();
+            let e = cmd.try_get_matches_from([flag.as_str()]).unwrap_err();
             assert!(e.to_string().contains(bad), "{e}");
         }
     }

@@ -47,7 +47,6 @@ use activesense_instrument::learn::agent::{action_index, masked_features, shape_
 use activesense_instrument::learn::file;
 use activesense_instrument::learn::net::{self, Adam, BatchCache, NetShape, PolicyNet};
 use activesense_instrument::world::plans;
-use activesense_instrument::world::sensor::SensorModel;
 use activesense_instrument::world::SimWorld;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -158,19 +157,12 @@ impl Env {
     /// A fresh episode on a random training plan.
     fn draw(hp: &HyperParams, rng: &mut Pcg64) -> EpisodeSpec {
         let plan_seed = rng.gen_range(plans::TRAIN_SEEDS);
-        EpisodeSpec {
-            plan_seed,
-            episode_seed: rng.gen(),
-            agent: AgentKind::Learnt,
-            rot_bins: hp.rot_bins,
-            config: EpisodeConfig {
-                max_actions: hp.max_actions,
-                ..EpisodeConfig::default()
-            },
-            sensor: SensorModel::default(),
-            termination: hp.termination,
-            user_plan: None,
-        }
+        let mut spec = EpisodeSpec::new(plan_seed, AgentKind::Learnt);
+        spec.episode_seed = rng.gen();
+        spec.rot_bins = hp.rot_bins;
+        spec.config.max_actions = hp.max_actions;
+        spec.termination = hp.termination;
+        spec
     }
 
     fn reset(&mut self, hp: &HyperParams) {
