@@ -1,11 +1,14 @@
-//! The README's tables against the files they come from: a figure in the README cannot drift
-//! from its committed result without this test failing (issue 23). Checked here: the "ours"
-//! rows of Table 4 against `results/results.json`, the greedy, greedy-confident and ablation
-//! tables against their runs, the int8 agreement table against `results/policy-agreement.json`,
-//! the Fig.-4 table against `docs/inspect/k{1,10}/aggregate.md`, the calibrated-stop table against
+//! The README's and the guide's tables against the files they come from: a figure cannot drift
+//! from its committed result without this test failing (issue 23). The README keeps the headline
+//! tables (the no-oracle table and Table 4), checked there and in `docs/results.md`; every other
+//! table lives in `docs/results.md` and is checked there: the "ours" rows of Table 4 against
+//! `results/results.json`, the greedy, greedy-confident and ablation tables against their runs, the
+//! int8 agreement table against `results/policy-agreement.json`, the Fig.-4 table against
+//! `docs/inspect/k{1,10}/aggregate.md`, the calibrated-stop table against
 //! `results/confident/results.json`, the no-oracle table against `results/no-oracle/results.json`,
-//! the frontier against `results/frontier/frontier.json`, the four MCU tables against `results/mcu-bench/*.md`
-//! (verbatim), and the size table against `results/size.md`.
+//! the frontier against `results/frontier/frontier.json`, the four MCU tables against
+//! `results/mcu-bench/*.md` (verbatim), and the size table against `results/size.md`. The README
+//! itself stays a short user's guide: at most 250 lines, no commit hashes, no issue numbers.
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -16,6 +19,15 @@ fn root() -> PathBuf {
         .unwrap()
         .to_path_buf()
 }
+
+/// Where the headline tables live: the README and the guide's results page.
+const HEADLINE_FILES: [&str; 2] = ["README.md", "docs/results.md"];
+/// Where every other table lives.
+const RESULTS: &str = "docs/results.md";
+/// The headline tables' headings, the same in both files. The no-oracle table is labelled with its
+/// instrument profile, so a second profile's table (EDM only) can sit beside it under its own.
+const NO_ORACLE: &str = "### Without an oracle: EDM + topological scan (the paper's sensor)";
+const TABLE_4: &str = "### Table 4: the paper's and ours (oracle stop)";
 
 fn read(rel: &str) -> String {
     std::fs::read_to_string(root().join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"))
@@ -70,11 +82,17 @@ fn table_after(text: &str, heading: &str) -> Vec<Vec<String>> {
 
 #[test]
 fn table_4_ours_rows_are_the_main_job() {
-    let readme = read("README.md");
+    for file in HEADLINE_FILES {
+        table_4_ours_rows_are_the_main_job_in(file);
+    }
+}
+
+fn table_4_ours_rows_are_the_main_job_in(file: &str) {
+    let readme = read(file);
     let results = json("results/results.json");
     let mut agent = String::new();
     let mut checked = 0;
-    for c in table_after(&readme, "## Results: the paper's Table 4 and ours") {
+    for c in table_after(&readme, TABLE_4) {
         if !c[0].is_empty() {
             agent = c[0].clone();
         }
@@ -99,16 +117,19 @@ fn table_4_ours_rows_are_the_main_job() {
                 f(k10, key),
                 d = *digits as usize
             );
-            assert_eq!(cell, &want, "README Table 4, {name}, {key}");
+            assert_eq!(cell, &want, "{file} Table 4, {name}, {key}");
         }
         checked += 1;
     }
-    assert!(checked >= 9, "only {checked} 'ours' rows found in Table 4");
+    assert!(
+        checked >= 9,
+        "only {checked} 'ours' rows found in {file}'s Table 4"
+    );
 }
 
 #[test]
 fn the_calibrated_stop_table_is_results_confident() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let confident = json("results/confident/results.json");
     let main = json("results/results.json");
     let greedy = json("results/greedy/results.json");
@@ -162,17 +183,32 @@ fn the_calibrated_stop_table_is_results_confident() {
     );
 }
 
-/// The README's no-oracle table (issue 21): every agent, K = 1 and 10, stopping by itself,
-/// from the main job's `results/no-oracle/results.json`.
+/// The no-oracle table (issue 21), in the README and in the guide's results page: every agent,
+/// K = 1 and 10, stopping by itself, from the main job's `results/no-oracle/results.json`.
 #[test]
 fn the_no_oracle_table_is_the_main_jobs() {
+    for file in HEADLINE_FILES {
+        the_no_oracle_table_is_the_main_jobs_in(file);
+    }
+    // Above the fold: first of the headline tables in the README, and in the results page before
+    // the greedy benchmarks.
     let readme = read("README.md");
-    let results = json("results/no-oracle/results.json");
-    // Above the fold: before the greedy benchmarks, right after Table 4.
     let at = readme
-        .find("## Without an oracle: what the instrument answers by itself")
+        .find(NO_ORACLE)
         .expect("README has the no-oracle section");
-    assert!(at < readme.find("## Greedy benchmarks").unwrap());
+    assert!(at < readme.find(TABLE_4).expect("README has Table 4"));
+    let results_page = read(RESULTS);
+    let at = results_page.find(NO_ORACLE).unwrap();
+    assert!(at < results_page.find("## Greedy benchmarks").unwrap());
+}
+
+fn the_no_oracle_table_is_the_main_jobs_in(file: &str) {
+    let readme = read(file);
+    let results = json("results/no-oracle/results.json");
+    assert!(
+        readme.contains(NO_ORACLE),
+        "{file} has the no-oracle section"
+    );
     let mm = |r: &Value, key: &str| {
         r[key]
             .as_f64()
@@ -180,10 +216,7 @@ fn the_no_oracle_table_is_the_main_jobs() {
             .unwrap_or_else(|| "–".into())
     };
     let mut checked = 0;
-    for c in table_after(
-        &readme,
-        "## Without an oracle: what the instrument answers by itself",
-    ) {
+    for c in table_after(&readme, NO_ORACLE) {
         let line = c.join(" | ");
         let k: u64 = c[1].parse().unwrap();
         let r = row(&results, &c[0], k);
@@ -214,14 +247,14 @@ fn the_no_oracle_table_is_the_main_jobs() {
         assert_eq!(c[9], fixed(r, "recognition_rate", 3), "{line}");
         checked += 1;
     }
-    assert_eq!(checked, 18, "nine agents, K = 1 and 10");
+    assert_eq!(checked, 18, "{file}: nine agents, K = 1 and 10");
 }
 
-/// The README's frontier table: per agent and K, cost and observed wrong answers at every
+/// The frontier table (`docs/results.md`): per agent and K, cost and observed wrong answers at every
 /// `--stop-risk` setting of `results/frontier/frontier.json`.
 #[test]
 fn the_frontier_table_is_results_frontier() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let fr = json("results/frontier/frontier.json");
     let risks: Vec<f64> = fr["stop_risks"]
         .as_array()
@@ -230,7 +263,7 @@ fn the_frontier_table_is_results_frontier() {
         .map(|v| v.as_f64().unwrap())
         .collect();
     let at = readme
-        .find("### The risk–cost frontier")
+        .find("## The risk–cost frontier")
         .expect("frontier section");
     let rows = table_at(&readme[at..], "", "| agent | K |");
     let mut checked = 0;
@@ -261,7 +294,7 @@ fn the_frontier_table_is_results_frontier() {
 
 #[test]
 fn the_mcu_tables_are_the_committed_benchmark_output() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     for file in [
         "results/mcu-bench/heuristic-1-oracle.md",
         "results/mcu-bench/learnt-int8-oracle.md",
@@ -275,14 +308,17 @@ fn the_mcu_tables_are_the_committed_benchmark_output() {
             .collect();
         assert_eq!(rows.len(), 2, "{file}: expected a K = 1 and a K = 10 row");
         for r in rows {
-            assert!(readme.contains(r), "README lacks this row of {file}:\n{r}");
+            assert!(
+                readme.contains(r),
+                "{RESULTS} lacks this row of {file}:\n{r}"
+            );
         }
     }
 }
 
 #[test]
 fn the_size_table_is_results_size() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let size = read("results/size.md");
     let number = |prefix: &str| -> u64 {
         let line = size.lines().find(|l| l.starts_with(prefix)).unwrap();
@@ -309,10 +345,10 @@ fn the_size_table_is_results_size() {
         let line = readme
             .lines()
             .find(|l| l.starts_with(&format!("| {what} (")))
-            .unwrap_or_else(|| panic!("README has no {what} row"));
+            .unwrap_or_else(|| panic!("{RESULTS} has no {what} row"));
         assert!(
             line.contains(&n),
-            "README's {what} row lacks {n} (results/size.md):\n{line}"
+            "{RESULTS}'s {what} row lacks {n} (results/size.md):\n{line}"
         );
     }
 }
@@ -324,7 +360,7 @@ fn fixed(r: &Value, key: &str, digits: usize) -> String {
 
 #[test]
 fn the_greedy_table_is_results_greedy() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let greedy = json("results/greedy/results.json");
     let main = json("results/results.json");
     let mut checked = 0;
@@ -349,10 +385,10 @@ fn the_greedy_table_is_results_greedy() {
 
 #[test]
 fn the_greedy_confident_table_is_results_greedy_confident() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let results = json("results/greedy-confident/results.json");
     let at = readme
-        .find("results/greedy-confident` (7 min) gives")
+        .find("### Greedy agents with the calibrated stop")
         .unwrap();
     let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| K |");
     assert_eq!(rows.len(), 2, "a K = 1 and a K = 10 row");
@@ -371,14 +407,14 @@ fn the_greedy_confident_table_is_results_greedy_confident() {
                 f(r, "wrong"),
                 f(r, "answered")
             );
-            assert_eq!(cell, &want, "README greedy-confident, {agent} K = {k}");
+            assert_eq!(cell, &want, "greedy-confident, {agent} K = {k}");
         }
     }
 }
 
 #[test]
 fn the_ablation_table_is_results_ablations() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let main = json("results/results.json");
     let mut checked = 0;
     let section = "## Ablations (paper §4.4)";
@@ -428,7 +464,7 @@ fn the_ablation_table_is_results_ablations() {
 /// The three-seed ablation tables are the `ablation_seeds` example's output, row for row.
 #[test]
 fn the_ablation_seed_tables_are_results_ablations_seeds() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let at = readme.find("## Ablations (paper §4.4)").unwrap();
     let section = &readme[at..];
     // The A2C study at both K, and the K = 10 ablations retrained with PPO's update.
@@ -446,7 +482,7 @@ fn the_ablation_seed_tables_are_results_ablations_seeds() {
         for r in rows {
             assert!(
                 section.contains(r),
-                "README lacks, from seeds-{table}.md: {r}"
+                "{RESULTS} lacks, from seeds-{table}.md: {r}"
             );
         }
     }
@@ -454,7 +490,7 @@ fn the_ablation_seed_tables_are_results_ablations_seeds() {
 
 #[test]
 fn the_agreement_table_is_results_policy_agreement() {
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let runs = json("results/policy-agreement.json");
     let at = readme.find("## The int8 policy on the instrument").unwrap();
     let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| K |");
@@ -496,9 +532,9 @@ fn the_agreement_table_is_results_policy_agreement() {
 
 #[test]
 fn the_fig4_table_is_the_committed_aggregates() {
-    // README: | distance | K = 1 measure | K = 1 rotate | K = 10 measure | K = 10 rotate |,
+    // docs/results.md: | distance | K = 1 measure | K = 1 rotate | K = 10 measure | K = 10 rotate |,
     // from the "activation, measure / rotate" columns of docs/inspect/k{1,10}/aggregate.md.
-    let readme = read("README.md");
+    let readme = read(RESULTS);
     let at = readme.find("**Fig. 4 over 200 test plans**").unwrap();
     let rows: Vec<Vec<String>> = table_at(&readme[at..], "", "| distance from the visual centre");
     let aggregate = |k: u32| -> Vec<Vec<String>> {
@@ -511,7 +547,7 @@ fn the_fig4_table_is_the_committed_aggregates() {
             .collect()
     };
     let (k1, k10) = (aggregate(1), aggregate(10));
-    assert_eq!(rows.len(), 6, "six distance bands in the README");
+    assert_eq!(rows.len(), 6, "six distance bands in {RESULTS}");
     assert_eq!(
         (k1.len(), k10.len()),
         (6, 6),
@@ -522,8 +558,44 @@ fn the_fig4_table_is_the_committed_aggregates() {
         assert_eq!(
             c[1..5].iter().collect::<Vec<_>>(),
             want,
-            "README Fig.-4 row {}",
+            "{RESULTS} Fig.-4 row {}",
             c[0]
         );
+    }
+}
+
+/// The README is a user's guide: short, and free of the project's history (commit hashes and
+/// issue numbers belong to the lab notebook, `docs/lab/`).
+#[test]
+fn the_readme_is_a_short_guide_without_history() {
+    let readme = read("README.md");
+    let lines = readme.lines().count();
+    assert!(lines <= 250, "README.md has {lines} lines (at most 250)");
+    for (n, line) in readme.lines().enumerate() {
+        assert!(
+            !line.contains("commit `"),
+            "README.md:{}: names a commit: {line}",
+            n + 1
+        );
+        let words: Vec<&str> = line.split_whitespace().collect();
+        for w in words.windows(2) {
+            let number = w[1].trim_start_matches('#');
+            let number = number.trim_end_matches(|c: char| !c.is_ascii_digit());
+            assert!(
+                !(w[0].eq_ignore_ascii_case("issue")
+                    && !number.is_empty()
+                    && number.chars().all(|c| c.is_ascii_digit())),
+                "README.md:{}: names an issue: {line}",
+                n + 1
+            );
+        }
+        // A bare commit id: 7 to 40 hex digits, with a digit and a letter among them.
+        for token in line.split(|c: char| !c.is_ascii_alphanumeric()) {
+            let hex = (7..=40).contains(&token.len())
+                && token.chars().all(|c| c.is_ascii_hexdigit())
+                && token.chars().any(|c| c.is_ascii_digit())
+                && token.chars().any(|c| c.is_ascii_alphabetic());
+            assert!(!hex, "README.md:{}: a commit id? {token}: {line}", n + 1);
+        }
     }
 }
