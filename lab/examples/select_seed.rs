@@ -22,8 +22,8 @@
 //! fails is no policy), then cost (what the paper and a surveyor pay).
 
 use activesense_core::episode::{AgentKind, EpisodeConfig};
+use activesense_instrument::agents::Policies;
 use activesense_instrument::episode::Termination;
-use activesense_instrument::learn::agent::Policies;
 use activesense_instrument::world::plans::{TEST_SEEDS, VALIDATION_SEEDS};
 use activesense_instrument::world::sensor::SensorModel;
 use activesense_lab::eval::harness::{self, EvalOptions};

@@ -6,10 +6,10 @@
 use activesense::commands::options::EpisodeOptions;
 use activesense::commands::station::{station, GeoComLink, StationArgs, StationReport};
 use activesense_core::episode::{AgentKind, EpisodeConfig};
+use activesense_instrument::agents::Policies;
 use activesense_instrument::episode::EpisodeSpec;
 use activesense_instrument::geocom::instrument::reference_session;
 use activesense_instrument::geocom::sim::{serve_tcp, FaultSpec, GeoComSim, SimConfig, SimState};
-use activesense_instrument::learn::agent::Policies;
 use activesense_instrument::world::planfile::{self, LoadOptions, PlanReadArgs};
 use activesense_instrument::world::plans;
 use std::path::{Path, PathBuf};

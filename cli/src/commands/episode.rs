@@ -4,9 +4,9 @@
 use super::options::{parse_agent, EpisodeOptions, SensorArgs};
 use super::write_file;
 use activesense_core::episode::AgentKind;
+use activesense_instrument::agents::{run_agent_episode, Policies};
 use activesense_instrument::answer::{parse_heading_hint, Answer, HeadingHint};
 use activesense_instrument::episode::{scan_string, EpisodeSpec, Trajectory};
-use activesense_instrument::learn::agent::{run_agent_episode, Policies};
 use activesense_instrument::plot::svg::{self, Scene};
 use activesense_instrument::world::planfile::{self, PlanReadArgs};
 use anyhow::Result;

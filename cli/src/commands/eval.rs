@@ -5,7 +5,7 @@
 use super::command_line;
 use super::options::{parse_agent, parse_stop_risk, parse_tolerance, EpisodeOptions, SensorArgs};
 use activesense_core::episode::AgentKind;
-use activesense_instrument::learn::agent::Policies;
+use activesense_instrument::agents::Policies;
 use activesense_instrument::world::planfile::{self, PlanReadArgs};
 use activesense_instrument::world::plans;
 use anyhow::{bail, Context, Result};

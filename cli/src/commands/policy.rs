@@ -4,7 +4,7 @@
 
 use super::options::RotBinsOption;
 use super::write_file;
-use activesense_instrument::learn::agent::Policies;
+use activesense_instrument::agents::Policies;
 use activesense_instrument::link::runner::open_link;
 use activesense_instrument::link::serial::{self, LinkSpec};
 use anyhow::{bail, Context, Result};

@@ -6,6 +6,7 @@ use super::options::{parse_agent, EpisodeOption, EpisodeOptions, SensorArgs};
 use activesense_core::episode::{Action, AgentKind, Termination};
 use activesense_core::pipeline::Stop;
 use activesense_core::registration::Measurement;
+use activesense_instrument::agents::Policies;
 use activesense_instrument::answer::{Answer, AnswerInput, HeadingHint};
 use activesense_instrument::episode::EpisodeSpec;
 use activesense_instrument::geocom::client::{
@@ -17,7 +18,6 @@ use activesense_instrument::geocom::instrument::{
 };
 use activesense_instrument::geocom::rpc;
 use activesense_instrument::geocom::sim::{FaultSpec, GeoComSim, SimConfig};
-use activesense_instrument::learn::agent::Policies;
 use activesense_instrument::world::planfile::{self, PlanFrame, PlanReadArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;

@@ -10,11 +10,11 @@
 //! distance × sin V. No distance (GRC_TMC_DIST_ERROR, GRC_TMC_ANGLE_OK, no signal) is a
 //! no-return, exactly as the simulator's.
 
+use crate::agents::Policies;
 use crate::baselines::greedy::EemAgent;
 use crate::geocom::client::{Client, GeoComError};
 use crate::geocom::codes::ReturnCode;
 use crate::geocom::rpc;
-use crate::learn::agent::Policies;
 use crate::world::sensor::SensorModel;
 use crate::world::SimWorld;
 use activesense_core::device::instrument::{Instrument, Turn};

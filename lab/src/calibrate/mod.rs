@@ -27,8 +27,8 @@ use activesense_core::stop::{
     interpolate_table, stop_score, AgentTable, StopFeatures, StopModel, AGENT_TABLES, FEATURES,
     STATED_RISKS,
 };
+use activesense_instrument::agents::{run_agent_episode_observed, Policies};
 use activesense_instrument::episode::Termination;
-use activesense_instrument::learn::agent::{run_agent_episode_observed, Policies};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;

@@ -5,8 +5,8 @@ use super::harness::{run, EvalOptions};
 use super::stats::wilson;
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::EpisodeConfig;
+use activesense_instrument::agents::Policies;
 use activesense_instrument::episode::Termination;
-use activesense_instrument::learn::agent::Policies;
 use activesense_instrument::world::sensor::SensorModel;
 
 fn small(plans: u32) -> EvalOptions {

@@ -208,7 +208,8 @@ pub fn write_page(trajectory: &Path, out: &Path) -> Result<()> {
 mod tests {
     use super::*;
     use activesense_core::episode::AgentKind;
-    use activesense_instrument::learn::agent::{default_policy_path, run_agent_episode, Policies};
+    use activesense_instrument::agents::{run_agent_episode, Policies};
+    use activesense_instrument::learn::agent::default_policy_path;
     use activesense_instrument::world::plans;
 
     fn scratch(name: &str) -> std::path::PathBuf {

@@ -1,0 +1,266 @@
+//! Which agent plays: the one dispatch from an agent's name ([`AgentKind`]) to its episode
+//! ([`run_agent_episode`]), used by every command, the evaluation, the calibration and the
+//! device link alike. The blind and heuristic agents come from their seeds (core), the
+//! learnt ones from the [`Policies`] a run loaded (a float network per rotation setting for
+//! `learnt`, an int8 blob for `learnt-int8`), the greedy benchmarks from
+//! [`crate::baselines::greedy`].
+
+use crate::baselines::greedy;
+use crate::episode;
+use crate::learn::agent::{default_policy_path, Int8Policy, LearntPolicy};
+use crate::learn::file;
+use crate::world::SimWorld;
+use activesense_core::episode::{Action, AgentKind};
+use activesense_core::policy::{BaselineAgent, Policy, PolicyInput};
+use std::path::PathBuf;
+
+/// The learnt policies of a run, one per rotation setting: float networks for the
+/// `learnt` agent, int8 blobs for `learnt-int8`.
+#[derive(Clone, Debug, Default)]
+pub struct Policies(Vec<LearntPolicy>, Vec<Int8Policy>);
+
+impl Policies {
+    /// Loads a policy for every setting in `rot_bins`: from `given` (files whose header
+    /// says which K they are for; two files for one K is an error, and so is a setting no
+    /// given file covers), or, when nothing is given, the committed
+    /// [`default_policy_path`]s. Every error names the file and what is wrong.
+    pub fn load(given: &[PathBuf], rot_bins: &[u8]) -> anyhow::Result<Self> {
+        let mut by_k: Vec<(u8, PathBuf)> = Vec::new();
+        for path in given {
+            let (net, _) = file::load(path)?;
+            let k = net.shape.rot_bins as u8;
+            if let Some((_, other)) = by_k.iter().find(|(kk, _)| *kk == k) {
+                anyhow::bail!(
+                    "two policies for K = {k}: '{}' and '{}'",
+                    other.display(),
+                    path.display()
+                );
+            }
+            by_k.push((k, path.clone()));
+        }
+        let mut out = Vec::new();
+        for &k in rot_bins {
+            let path = match by_k.iter().find(|(kk, _)| *kk == k) {
+                Some((_, p)) => p.clone(),
+                None if given.is_empty() => default_policy_path(k),
+                None => {
+                    let have: Vec<String> = by_k.iter().map(|(kk, _)| kk.to_string()).collect();
+                    anyhow::bail!(
+                        "--rot-bins {k} needs a policy trained for K = {k}, but the --policy file(s) given are for K = {}",
+                        have.join(", ")
+                    );
+                }
+            };
+            out.push(LearntPolicy::load(&path, k).map_err(|e| {
+                anyhow::anyhow!("{e} (the learnt agent with --rot-bins {k} needs a policy for K = {k}; train one with `activesense train --rot-bins {k}` or pass --policy FILE)")
+            })?);
+        }
+        Ok(Policies(out, Vec::new()))
+    }
+
+    /// Adds an int8 blob for every setting in `rot_bins`: from `given` files (each for the
+    /// K its header names; every setting must be covered when any is given), or the blobs
+    /// built into the firmware ([`activesense_core::policy::builtin`]).
+    pub fn load_int8(&mut self, given: &[PathBuf], rot_bins: &[u8]) -> anyhow::Result<()> {
+        let mut blobs = Vec::new();
+        for path in given {
+            let p = Int8Policy::load(path)?;
+            if blobs.iter().any(|b: &Int8Policy| b.rot_bins == p.rot_bins) {
+                anyhow::bail!("two int8 policies for K = {}", p.rot_bins);
+            }
+            blobs.push(p);
+        }
+        if given.is_empty() {
+            for (k, bytes) in [
+                (1u8, activesense_core::policy::builtin::K1),
+                (10, activesense_core::policy::builtin::K10),
+            ] {
+                blobs.push(Int8Policy::new(
+                    bytes.to_vec(),
+                    format!("built-in k{k}/policy.q8"),
+                )?);
+            }
+        }
+        for &k in rot_bins {
+            let Some(p) = blobs.iter().find(|b| b.rot_bins == k) else {
+                anyhow::bail!(
+                    "--rot-bins {k} needs an int8 policy for K = {k}, but the --int8 file(s) given are for K = {}",
+                    blobs.iter().map(|b| b.rot_bins.to_string()).collect::<Vec<_>>().join(", ")
+                );
+            };
+            self.1.push(p.clone());
+        }
+        Ok(())
+    }
+
+    /// Uses `p` for its K (replacing any int8 policy for that K).
+    pub fn set_int8(&mut self, p: Int8Policy) {
+        self.1.retain(|q| q.rot_bins != p.rot_bins);
+        self.1.push(p);
+    }
+
+    /// The int8 policy for `rot_bins`.
+    pub fn int8_for(&self, rot_bins: u8) -> Option<&Int8Policy> {
+        self.1.iter().find(|p| p.rot_bins == rot_bins)
+    }
+
+    /// The loaded int8 policies.
+    pub fn int8(&self) -> impl Iterator<Item = &Int8Policy> {
+        self.1.iter()
+    }
+
+    /// The policy for `rot_bins`.
+    pub fn for_rot_bins(&self, rot_bins: u8) -> Option<&LearntPolicy> {
+        self.0
+            .iter()
+            .find(|p| p.net.shape.rot_bins == rot_bins as usize)
+    }
+
+    /// The loaded policies.
+    pub fn iter(&self) -> impl Iterator<Item = &LearntPolicy> {
+        self.0.iter()
+    }
+}
+
+/// Runs one episode of `spec.agent`: a baseline from its seed, the learnt policy for
+/// `spec.rot_bins` from `policies`, or a greedy benchmark.
+pub fn run_agent_episode(
+    spec: &episode::EpisodeSpec,
+    policies: &Policies,
+) -> anyhow::Result<episode::Trajectory> {
+    run_agent_episode_timed(spec, policies).map(|(t, _)| t)
+}
+
+/// Time an agent spent deciding in one episode.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DecisionTime {
+    /// Decisions taken.
+    pub decisions: u32,
+    /// Wall time inside the policy (s).
+    pub seconds: f64,
+}
+
+/// Wraps a policy and clocks its decisions.
+struct Timed<'a> {
+    inner: &'a mut dyn Policy,
+    time: DecisionTime,
+}
+
+impl Policy for Timed<'_> {
+    fn act(&mut self, input: &PolicyInput<'_>) -> Action {
+        let t = std::time::Instant::now();
+        let a = self.inner.act(input);
+        self.time.seconds += t.elapsed().as_secs_f64();
+        self.time.decisions += 1;
+        a
+    }
+}
+
+/// [`run_agent_episode`], with the time the agent spent deciding.
+pub fn run_agent_episode_timed(
+    spec: &episode::EpisodeSpec,
+    policies: &Policies,
+) -> anyhow::Result<(episode::Trajectory, DecisionTime)> {
+    run_agent_episode_observed(spec, policies, &mut |_| {})
+}
+
+/// [`run_agent_episode_timed`] with an observer of every step
+/// ([`episode::run_episode_observed`]).
+pub fn run_agent_episode_observed(
+    spec: &episode::EpisodeSpec,
+    policies: &Policies,
+    observe: &mut dyn FnMut(episode::EpisodeView<'_>),
+) -> anyhow::Result<(episode::Trajectory, DecisionTime)> {
+    let mut timed = |spec: &episode::EpisodeSpec, p: &mut dyn Policy| {
+        let mut t = Timed {
+            inner: p,
+            time: DecisionTime::default(),
+        };
+        let traj = episode::run_episode_observed(spec, &mut t, observe);
+        (traj, t.time)
+    };
+    Ok(match spec.agent {
+        AgentKind::Learnt => {
+            let p = policies.for_rot_bins(spec.rot_bins).ok_or_else(|| {
+                anyhow::anyhow!("no learnt policy loaded for K = {}", spec.rot_bins)
+            })?;
+            timed(spec, &mut p.agent())
+        }
+        AgentKind::LearntInt8 => {
+            let p = policies.int8_for(spec.rot_bins).ok_or_else(|| {
+                anyhow::anyhow!("no int8 policy loaded for K = {}", spec.rot_bins)
+            })?;
+            p.with_agent(|agent| timed(spec, agent))
+        }
+        AgentKind::Oigm | AgentKind::OigmCost => {
+            // The oracle needs the room and the truth the episode will have: the same
+            // seeds give the same world.
+            let plan = spec.plan();
+            let truth =
+                SimWorld::new(plan.clone(), spec.sensor, spec.config, spec.world_seed()).truth();
+            let mut agent = greedy::OigmAgent::new(
+                plan,
+                truth,
+                spec.sensor,
+                spec.config,
+                spec.agent == AgentKind::OigmCost,
+            );
+            timed(spec, &mut agent)
+        }
+        AgentKind::Eem => {
+            let plan = spec.plan();
+            let mut agent = greedy::EemAgent::new(plan, spec.sensor, spec.config);
+            timed(spec, &mut agent)
+        }
+        _ => timed(spec, &mut BaselineAgent::new(spec.agent, spec.agent_seed())),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::learn::agent::shape_for;
+    use crate::learn::net::PolicyNet;
+
+    #[test]
+    fn policy_sets_reject_what_does_not_fit() {
+        let dir = std::env::temp_dir().join(format!("activesense-policies-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let k1 = dir.join("k1.policy");
+        file::save(
+            &k1,
+            &PolicyNet::new(shape_for(1), 3),
+            &serde_json::json!({}),
+        )
+        .unwrap();
+        // The right K loads; the wrong K is refused with both numbers named.
+        let ok = Policies::load(std::slice::from_ref(&k1), &[1]).unwrap();
+        assert_eq!(ok.for_rot_bins(1).unwrap().net.shape.rot_bins, 1);
+        let e = Policies::load(std::slice::from_ref(&k1), &[10])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("K = 10") && e.contains("K = 1"), "{e}");
+        // Two files for one K.
+        let e = Policies::load(&[k1.clone(), k1.clone()], &[1])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("two policies"), "{e}");
+        // A corrupt file: the message names it and says why.
+        let bad = dir.join("bad.policy");
+        let mut bytes = std::fs::read(&k1).unwrap();
+        let last = bytes.len() - 10;
+        bytes[last] ^= 0x40;
+        std::fs::write(&bad, &bytes).unwrap();
+        let e = Policies::load(std::slice::from_ref(&bad), &[1])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bad.policy") && e.contains("checksum"), "{e}");
+        // Not a policy at all.
+        std::fs::write(&bad, b"hello").unwrap();
+        let e = Policies::load(std::slice::from_ref(&bad), &[1])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bad.policy"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
