@@ -27,3 +27,6 @@ pub mod learn;
 pub mod link;
 pub mod plot;
 pub mod world;
+
+#[cfg(test)]
+mod fixtures;

@@ -584,14 +584,10 @@ pub fn readings_of_steps(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use activesense_core::world::geometry::{rotate, unit, v2};
+    use activesense_core::world::geometry::{rotate, unit};
 
     fn rect() -> FloorPlan {
-        let v: Vec<_> = [(-6.0, -4.0), (6.0, -4.0), (6.0, 4.0), (-6.0, 4.0)]
-            .iter()
-            .map(|&(x, y)| v2(x, y))
-            .collect();
-        FloorPlan::new(&v).unwrap()
+        crate::fixtures::rect(12.0, 8.0)
     }
 
     /// Exact readings from `pose` at `bearings` (scene frame).

@@ -203,8 +203,7 @@ mod tests {
 
     #[test]
     fn square_visual_centre_is_the_middle() {
-        let sq =
-            FloorPlan::new(&[v2(-4.0, -4.0), v2(4.0, -4.0), v2(4.0, 4.0), v2(-4.0, 4.0)]).unwrap();
+        let sq = crate::fixtures::rect(8.0, 8.0);
         let p = placement(&sq);
         assert!(p.visual_centre[0].abs() < 0.02 && p.visual_centre[1].abs() < 0.02);
         assert!((p.radius - 4.0).abs() < 0.02);

@@ -156,7 +156,7 @@ mod tests {
     use rand_pcg::Pcg32;
 
     fn square() -> FloorPlan {
-        FloorPlan::new(&[v2(-5.0, -5.0), v2(5.0, -5.0), v2(5.0, 5.0), v2(-5.0, 5.0)]).unwrap()
+        crate::fixtures::rect(10.0, 10.0)
     }
 
     #[test]

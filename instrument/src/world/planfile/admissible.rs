@@ -136,13 +136,7 @@ pub fn check(plan: &FloorPlan) -> Result<Vec<String>, String> {
 mod tests {
     use super::*;
 
-    fn rect(w: f32, h: f32) -> FloorPlan {
-        let v: Vec<_> = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)]
-            .iter()
-            .map(|&(x, y)| v2(x, y))
-            .collect();
-        FloorPlan::new(&v).unwrap().centered()
-    }
+    use crate::fixtures::rect;
 
     #[test]
     fn the_issue_rooms() {
