@@ -6,5 +6,9 @@
 //! `activesense-instrument`; the lab's (`train`, `eval`, `calibrate`, `bench-*`,
 //! `answer-coverage`, `inspect`, `policy quantize/agreement`, `mcu-bench`, `dataset`) drive
 //! `activesense-lab`.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`commands`] | one module per command, and [`commands::options`] the options they share, declared once |
 
 pub mod commands;

@@ -46,7 +46,7 @@
 //! | [`registration`] | 3.3 (observations, the registration's overview) |
 //! | [`registration::icp`] | 3.3 (Sparse ICP, Algorithm 4, equation 6; annealed perturbation, Algorithm 3) |
 //! | [`registration::fits`] | 3.3 extended (observability of the readings, range fit) |
-//! | [`registration::precision`] | the answer's precision: pose covariance from the information matrix (issue 20) |
+//! | [`registration::precision`] | the answer's precision: pose covariance from the information matrix |
 //! | [`registration::refine`] | 3.3 extended (multi-hypothesis refinement) |
 //! | [`registration::pose_distance`] | 3.4 (symmetry-aware pose distance, Table 2, equations 7–10) |
 //! | [`stop`] | 3.1 extended (the calibrated stop: P(wrong registration)) |
@@ -74,6 +74,9 @@ pub mod protocol;
 pub mod registration;
 pub mod stop;
 pub mod world;
+
+#[cfg(test)]
+mod fixtures;
 
 pub use world::floorplan::{FloorPlan, PlanError, RayHit, MAX_VERTICES};
 pub use world::geometry::{Pose2, Vec2};

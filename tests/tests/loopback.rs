@@ -3,8 +3,8 @@
 
 use activesense_core::device::{Session, SessionConfig};
 use activesense_core::protocol::Phase;
-use activesense_sim::link::device::{serve_std, Pipe, HOST_DEVICE};
-use activesense_sim::link::serial::{self, Client, LinkSpec};
+use activesense_instrument::link::device::{serve_std, Pipe, HOST_DEVICE};
+use activesense_instrument::link::serial::{self, Client, LinkSpec};
 use activesense_tests::{
     check_episodes, check_episodes_with, confident_stop, fault_suite, host_actions, host_episode,
     spec,
@@ -102,7 +102,7 @@ fn device_survives_hosts_that_disappear() {
     let t = std::thread::spawn(move || {
         let mut c = Client::new(host);
         c.hello().unwrap();
-        let (plan, params, _) = activesense_sim::link::device::sim_episode(&spec(0, 10));
+        let (plan, params, _) = activesense_instrument::link::device::sim_episode(&spec(0, 10));
         c.load_plan(&plan).unwrap();
         c.call(&activesense_core::protocol::Request::StartEpisode(params))
             .unwrap();
@@ -116,7 +116,7 @@ fn device_survives_hosts_that_disappear() {
     let t = std::thread::spawn(move || {
         let mut c = Client::new(host);
         c.hello().unwrap();
-        let (plan, params, _) = activesense_sim::link::device::sim_episode(&spec(1, 1));
+        let (plan, params, _) = activesense_instrument::link::device::sim_episode(&spec(1, 1));
         c.load_plan(&plan).unwrap();
         c.call(&activesense_core::protocol::Request::StartEpisode(params))
             .unwrap();

@@ -4,8 +4,8 @@
 #![cfg(unix)]
 
 use activesense_core::device::{ServeEnd, Session};
-use activesense_sim::link::device::{serve_std, HOST_DEVICE};
-use activesense_sim::link::serial::Client;
+use activesense_instrument::link::device::{serve_std, HOST_DEVICE};
+use activesense_instrument::link::serial::Client;
 use activesense_tests::{check_episodes, fault_suite};
 use serialport::{SerialPort, TTYPort};
 use std::time::Duration;

@@ -14,9 +14,9 @@
 //! instruction count (`cargo xtask mcu-bench` counts instructions). Not watched: the stack's high-water mark, which the firmware does not measure.
 
 use activesense_core::episode::AgentKind;
-use activesense_sim::episode::EpisodeSpec;
-use activesense_sim::link::serial::{self, LinkSpec};
-use activesense_sim::world::plans::TEST_SEEDS;
+use activesense_instrument::episode::EpisodeSpec;
+use activesense_instrument::link::serial::{self, LinkSpec};
+use activesense_instrument::world::plans::TEST_SEEDS;
 use activesense_tests::{check_episodes_with, confident_stop, firmware_elf};
 use std::time::{Duration, Instant};
 

@@ -4,7 +4,7 @@
 
 use activesense_core::world::geometry::{unit, v2};
 use activesense_core::FloorPlan;
-use activesense_sim::world::plans::{
+use activesense_instrument::world::plans::{
     self, generate, MAX_GEN_VERTICES, MAX_SIDE, MIN_SIDE, MIN_VERTICES, TEST_SEEDS, TRAIN_SEEDS,
 };
 use proptest::prelude::*;
@@ -72,7 +72,7 @@ fn test_set_fingerprint() {
 
 #[test]
 fn symmetric_rooms_are_part_of_the_test_set() {
-    use activesense_sim::world::plans::Shape;
+    use activesense_instrument::world::plans::Shape;
     let mut squares = 0;
     let mut rects = 0;
     for s in TEST_SEEDS {

@@ -508,6 +508,7 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::episode::{Action, AgentKind, EpisodeConfig, Observation, Termination};
+    use crate::fixtures::rect_4x3_wire;
     use crate::world::geometry::Pose2;
     use std::vec::Vec;
 
@@ -557,10 +558,6 @@ mod tests {
         r
     }
 
-    fn square() -> HVec<[f32; 2], MAX_WIRE_VERTICES> {
-        HVec::from_slice(&[[-2.0, -1.5], [2.0, -1.5], [2.0, 1.5], [-2.0, 1.5]]).unwrap()
-    }
-
     fn params(max_actions: u16) -> EpisodeParams {
         EpisodeParams {
             agent: AgentKind::Heuristic1,
@@ -600,12 +597,24 @@ mod tests {
             Response::Error(WireError::OutOfSequence { expected: 6 })
         );
         assert!(matches!(
-            call(&mut s, 6, &Request::LoadPlan { vertices: square() }),
+            call(
+                &mut s,
+                6,
+                &Request::LoadPlan {
+                    vertices: rect_4x3_wire()
+                }
+            ),
             Response::PlanLoaded(_)
         ));
         // Retransmission of id 6 gets the same reply again.
         assert!(matches!(
-            call(&mut s, 6, &Request::LoadPlan { vertices: square() }),
+            call(
+                &mut s,
+                6,
+                &Request::LoadPlan {
+                    vertices: rect_4x3_wire()
+                }
+            ),
             Response::PlanLoaded(_)
         ));
         let mut id = 7;
@@ -678,7 +687,7 @@ mod tests {
     #[test]
     fn cycle_statistics_split_by_update_kind() {
         let mut ctl = Controller::new(Some(tick7), &[]);
-        let plan = FloorPlan::from_raw(HVec::from_slice(&square()).unwrap()).unwrap();
+        let plan = FloorPlan::from_raw(HVec::from_slice(&rect_4x3_wire()).unwrap()).unwrap();
         ctl.load_plan(plan);
         ctl.start(&params(40)).unwrap();
         let mut k = 0;
@@ -716,7 +725,7 @@ mod tests {
     }
 
     /// A session that said hello and holds the square plan (request ids 1 and 2 used).
-    fn session_with_square() -> Session {
+    fn session_with_rect_4x3() -> Session {
         let mut s = Session::new(CFG);
         call(
             &mut s,
@@ -725,13 +734,19 @@ mod tests {
                 protocol: PROTOCOL_VERSION,
             },
         );
-        call(&mut s, 2, &Request::LoadPlan { vertices: square() });
+        call(
+            &mut s,
+            2,
+            &Request::LoadPlan {
+                vertices: rect_4x3_wire(),
+            },
+        );
         s
     }
 
     #[test]
     fn host_only_agents_are_refused() {
-        let mut s = session_with_square();
+        let mut s = session_with_rect_4x3();
         // The float network and the greedy benchmarks live on the host only.
         let host_only = [
             AgentKind::Learnt,
@@ -784,7 +799,13 @@ mod tests {
             call(&mut s, 4, &Request::StartEpisode(params(5))),
             Response::Error(WireError::NoPlan)
         );
-        call(&mut s, 5, &Request::LoadPlan { vertices: square() });
+        call(
+            &mut s,
+            5,
+            &Request::LoadPlan {
+                vertices: rect_4x3_wire(),
+            },
+        );
         let mut p = params(5);
         p.rot_bins = 1;
         assert_eq!(
@@ -845,7 +866,7 @@ mod tests {
 
     #[test]
     fn stop_rule_params_are_validated_and_carried() {
-        let mut s = session_with_square();
+        let mut s = session_with_rect_4x3();
         let mut id = 3;
         for risk in [f32::NAN, 0.0, 1.5, -0.5, f32::INFINITY] {
             let mut p = params(5);
@@ -908,7 +929,13 @@ mod tests {
                 protocol: PROTOCOL_VERSION,
             },
         );
-        call(&mut s, 2, &Request::LoadPlan { vertices: square() });
+        call(
+            &mut s,
+            2,
+            &Request::LoadPlan {
+                vertices: rect_4x3_wire(),
+            },
+        );
         call(&mut s, 3, &Request::StartEpisode(params(50)));
         assert_eq!(s.phase(), Phase::Episode);
         assert!(!s.poll(500));
@@ -943,7 +970,7 @@ mod tests {
     /// is done twice; an out-of-sequence id still gets no cached reply.
     #[test]
     fn refusals_are_retransmitted() {
-        let mut s = session_with_square();
+        let mut s = session_with_rect_4x3();
         let mut p = params(5);
         p.rot_bins = 1;
         p.known_heading = None;

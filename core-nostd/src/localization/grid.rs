@@ -35,7 +35,7 @@ pub struct CellIndex {
     pub bin: u8,
 }
 
-/// One mode of a belief (see [`top_modes`]).
+/// One mode of a belief (see [`GhtLocalizer::top_modes`](super::GhtLocalizer::top_modes)).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Mode {
     /// The cell.
@@ -312,52 +312,6 @@ pub fn argmax(w: &[f32]) -> usize {
     best
 }
 
-/// Up to `N` modes in decreasing score `w` (raw weights in the grid layout; any order-
-/// preserving view works), with non-maximum suppression: a cell within `min_separation`
-/// (Chebyshev in x, y and circular in bins, [`GridSpec::near`]) of an already chosen mode is
-/// not a new mode. Zero-score cells are never modes. `prob(i)` gives the normalised
-/// probability of flat cell `i`, reported as [`Mode::mass`].
-pub fn top_modes<const N: usize, F: Fn(usize) -> f32>(
-    grid: &GridSpec,
-    w: &[f32],
-    min_separation: u8,
-    prob: F,
-) -> HVec<Mode, N> {
-    top_modes_by(grid, w.len(), |i| w[i], min_separation, prob)
-}
-
-/// [`top_modes`] with the score of flat cell `i < n` given by `score(i)` instead of a slice.
-pub fn top_modes_by<const N: usize, S: Fn(usize) -> f32, F: Fn(usize) -> f32>(
-    grid: &GridSpec,
-    n: usize,
-    score: S,
-    min_separation: u8,
-    prob: F,
-) -> HVec<Mode, N> {
-    let mut out: HVec<Mode, N> = HVec::new();
-    while !out.is_full() {
-        let mut best: Option<(usize, f32)> = None;
-        for (i, v) in (0..n).map(|i| (i, score(i))) {
-            if v <= 0.0 || best.is_some_and(|(_, bv)| v <= bv) {
-                continue;
-            }
-            let c = grid.cell_at(i);
-            if out.iter().any(|m| grid.near(m.cell, c, min_separation)) {
-                continue;
-            }
-            best = Some((i, v));
-        }
-        let Some((i, _)) = best else { break };
-        let cell = grid.cell_at(i);
-        let _ = out.push(Mode {
-            cell,
-            pose: grid.pose_of(cell),
-            mass: prob(i),
-        });
-    }
-    out
-}
-
 /// Probability mass (`prob(i)` = normalised probability of flat cell `i`, `n` cells) within
 /// the coarse tolerance (radius 1, [`GridSpec::near`]) of `centre` and of its C_n-equivalent
 /// cells (each cell counted once).
@@ -379,7 +333,7 @@ pub fn mass_near<F: Fn(usize) -> f32>(
     }
     // Only the rows (bin, iy) some centre is near are visited, in flat-index order, so the
     // sum adds the same cells in the same order as a pass over all `n` cells (bit-identical;
-    // issue 22: that pass cost a division per cell on the M4F, twice per reading under the
+    // that pass cost a division per cell on the M4F, twice per reading under the
     // calibrated stop).
     let mut m = 0.0;
     let (nx, ny) = (grid.nx as usize, grid.ny as usize);

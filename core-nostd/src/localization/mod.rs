@@ -227,31 +227,6 @@ impl Default for LocalizerConfig {
     }
 }
 
-/// A belief-only "confident" test ([`GhtLocalizer::is_confident`]). The pipeline's confident
-/// stop used it before issue 12; it now uses the calibrated estimate of [`crate::stop`].
-///
-/// Default: peak mass ≥ 0.95 and entropy ≤ 4 nats. The belief is over-confident: with 0.5,
-/// heuristic-1 stopped confidently but wrongly in 9 % (K = 1) and 26 % (K = 10) of 1000 test
-/// episodes; 0.95 cuts that to 6 % and 20 % for 3 more measurements (`activesense eval
-/// --agents heuristic-1 --termination confident --plans 1000`, docs/EVALUATION.md).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Confidence {
-    /// Smallest PMF mass within the coarse tolerance of the argmax and of its C_n
-    /// equivalents ([`grid::mass_near`]).
-    pub min_peak_mass: f32,
-    /// Largest Shannon entropy of the PMF (nats).
-    pub max_entropy: f32,
-}
-
-impl Default for Confidence {
-    fn default() -> Self {
-        Confidence {
-            min_peak_mass: 0.95,
-            max_entropy: 4.0,
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests;
 #[cfg(test)]

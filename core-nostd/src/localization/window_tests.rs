@@ -1,8 +1,9 @@
 //! Unit tests of the coarse-to-fine argmax (`GhtLocalizer::refine_argmax`): the fine headings at
 //! `K > 1`, the unquantised window votes at `K = 1`, and that both are incremental and exact.
 
-use super::tests::{boxed, l_room, measure, uniform};
+use super::tests::{boxed, measure, uniform};
 use super::*;
+use crate::fixtures::l_room_8x6;
 use crate::world::geometry::v2;
 use crate::world::math::TAU;
 use crate::Pose2;
@@ -18,7 +19,7 @@ use std::vec::Vec;
 /// cell and bin of the coarse argmax, and an update forgets it.
 #[test]
 fn fine_argmax_corrects_heading_quantisation() {
-    let p = l_room();
+    let p = l_room_8x6();
     let cfg = LocalizerConfig::default();
     let mut l = boxed(&p, &cfg);
     let mut rng = Pcg32::seed_from_u64(12);
@@ -61,7 +62,7 @@ fn fine_argmax_corrects_heading_quantisation() {
 /// the window's unquantised votes take the cell nearer the truth more often.
 #[test]
 fn known_heading_window_argmax_takes_the_cell_near_an_edge() {
-    let p = l_room();
+    let p = l_room_8x6();
     let heading = 0.3;
     let mut l = boxed(&p, &LocalizerConfig::known_heading(heading));
     let mut rng = Pcg32::seed_from_u64(5);
@@ -124,7 +125,7 @@ fn known_heading_window_argmax_is_incremental_and_exact() {
 /// [`fine_argmax_is_incremental_and_exact`] with `known_heading`: `K = 1` at that heading,
 /// else the default `K = 10` with the truth's heading drawn.
 fn fine_argmax_is_incremental_and_exact_for(known_heading: Option<f32>) {
-    let p = l_room();
+    let p = l_room_8x6();
     let cfg = known_heading.map_or(LocalizerConfig::default(), LocalizerConfig::known_heading);
     let mut l = boxed(&p, &cfg);
     let mut reference = boxed(&p, &cfg);

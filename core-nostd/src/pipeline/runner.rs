@@ -187,13 +187,10 @@ mod tests {
     use crate::limits::SCAN_PIXELS;
     use crate::pipeline::Termination;
     use crate::policy::BaselineAgent;
-    use crate::world::geometry::v2;
 
     #[test]
     fn rejects_bad_answers_and_keeps_state() {
-        let plan = FloorPlan::new(&[v2(0.0, 0.0), v2(6.0, 0.0), v2(6.0, 4.0), v2(0.0, 4.0)])
-            .unwrap()
-            .centered();
+        let plan = crate::fixtures::centred_rect(6.0, 4.0);
         let mut r = EpisodeRunner::new_empty();
         let params = EpisodeParams {
             agent: AgentKind::Heuristic1,

@@ -171,7 +171,7 @@ impl PolicyInput<'_> {
         // is monotone, so the values do not decrease with the level: from the top down, once
         // a level gives level 0's value, every level below gives it too. Far below the peak
         // that is most levels (they round to the zero point), and each one is two divisions
-        // and a software `roundf` on the M4 (issue 22: the decision's worst case).
+        // and a software `roundf` on the M4 (in the decision's worst case, every level).
         let bottom = value(0);
         let mut m = top;
         while m > 0 {
@@ -212,7 +212,7 @@ impl PolicyInput<'_> {
             BELIEF_SIDE,
             &table,
             outside,
-            <crate::policy::int8::dot::Fast as crate::policy::int8::dot::Dot>::max_u8x4,
+            <crate::policy::int8::Fast as crate::policy::int8::dot::Dot>::max_u8x4,
         );
         self.belief_len()
     }
@@ -319,7 +319,7 @@ mod tests {
     fn belief_map_is_probability_over_peak_bit_for_bit() {
         // The table-driven extraction equals the plain definition prob(i) · (1 / peak) at
         // every cell, before and after votes, with the heading known and unknown.
-        let plan = crate::pipeline::tests::l_room();
+        let plan = crate::fixtures::l_room_8x6();
         let truth = crate::Pose2::new(-1.0, -0.5, 0.3);
         for cfg in [
             LocalizerConfig::known_heading(0.3),

@@ -1,4 +1,4 @@
-//! What one refinement may spend, and on what (issue 22): the named budgets of the
+//! What one refinement may spend, and on what: the named budgets of the
 //! multi-hypothesis refinement ([`crate::registration::refine`]), apart from the search
 //! that spends them. A budget caps the leave-out hypotheses, the heading sweep, the ICPs
 //! inside the annealing and its rounds, and says whether the previous reading's answer is
@@ -13,7 +13,7 @@ pub const LEAVE_OUT_MAX_READINGS: usize = 10;
 /// How the refinement chooses its hypotheses: the named [`Budget`]s.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Search {
-    /// [`Budget::EXHAUSTIVE`]: what the refinement was before issue 22; kept as the
+    /// [`Budget::EXHAUSTIVE`]: the refinement as first built, with no cap; kept as the
     /// reference the others are measured against.
     Exhaustive,
     /// [`Budget::SCREENED`]: after every reading past the stop gate.
@@ -30,7 +30,7 @@ impl Search {
     }
 }
 
-/// What one refinement may spend, and on what (issue 22). `u16::MAX` / `u8::MAX` leave a
+/// What one refinement may spend, and on what. `u16::MAX` / `u8::MAX` leave a
 /// quantity to the registration parameters (or to convergence).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Budget {
@@ -50,7 +50,7 @@ pub struct Budget {
     /// Rounds of the winner's final annealing.
     pub final_rounds: u16,
     /// The final annealing starts where the screening left the winner (`true`), or again
-    /// from the belief argmax after a heading sweep (`false`, as before issue 22).
+    /// from the belief argmax after a heading sweep (`false`, as the exhaustive search does).
     pub final_from_winner: bool,
     /// After one more reading, re-fit the previous reading's refinement from its pose
     /// ([`refine_after`](crate::registration::refine::refine_after)) instead of searching afresh.
@@ -58,7 +58,7 @@ pub struct Budget {
     /// Up to this many readings every annealing draws its configured perturbations per
     /// round; past it, proportionally fewer ([`Budget::perturbations`]). Every ICP
     /// iteration searches one correspondence per reading, so this keeps the annealing's
-    /// work per refinement from growing with a long episode (issue 22: a 27-reading
+    /// work per refinement from growing with a long episode (uncapped, a 27-reading
     /// update took 54.6 M instructions on the device). `u8::MAX`: never fewer.
     pub full_readings: u8,
     /// ICP iterations inside each annealing round past [`Budget::full_readings`]
@@ -121,7 +121,7 @@ impl Budget {
     /// previous reading's basin, which left confident K = 1 answers 0.5 mm further from the
     /// truth (learnt: 5.6 against 5.1 mm, outside the interval; `docs/EVALUATION.md`). It
     /// tries the screened leave-outs, not every one: every leave-out, after every reading of
-    /// a long K = 1 episode, was its worst on-device update (40.9 M instructions, issue 22);
+    /// a long K = 1 episode, was its worst on-device update (40.9 M instructions);
     /// the end of the episode still tries every one ([`Budget::end_of_episode`]).
     pub const fn per_reading(heading_known: bool) -> Budget {
         if heading_known {

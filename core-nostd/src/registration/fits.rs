@@ -1,10 +1,10 @@
 //! How well readings fit and determine a pose, without moving it: the observability test
-//! (the smallest eigenvalue of the readings' normalised information matrix, issue 12) and
+//! (the smallest eigenvalue of the readings' normalised information matrix) and
 //! the range fit under the EDM's range model (what the refinement scores hypotheses with).
 
 use super::*;
 
-/// How well a set of readings determines the pose (issue 12's observability test): the
+/// How well a set of readings determines the pose (the observability test): the
 /// smallest eigenvalue of the normalised information matrix of the point-to-wall
 /// constraints the readings would give at a pose.
 ///

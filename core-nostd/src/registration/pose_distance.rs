@@ -193,7 +193,7 @@ pub struct Tolerance {
 
 impl Tolerance {
     /// 5 cm and 0.5°: a setting-out tolerance a surveyor accepts for a free station before
-    /// fine-aiming at control points (issue 21's default).
+    /// fine-aiming at control points (the default).
     pub const SURVEYOR: Tolerance = Tolerance {
         position_m: 0.05,
         heading_rad: 0.5 * core::f32::consts::PI / 180.0,
@@ -241,27 +241,9 @@ impl PoseDistance {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::geometry::{rotate, v2, Vec2};
+    use crate::fixtures::{centred, centred_rect, l_room_6x4};
+    use crate::world::geometry::{rotate, v2};
     use proptest::prelude::*;
-
-    fn plan(pts: &[(f32, f32)]) -> FloorPlan {
-        let v: HVec<Vec2, MAX_VERTICES> = pts.iter().map(|&(x, y)| v2(x, y)).collect();
-        FloorPlan::new(&v).unwrap().centered()
-    }
-
-    fn l_room() -> FloorPlan {
-        FloorPlan::new(&crate::world::floorplan::l_room_6x4())
-            .unwrap()
-            .centered()
-    }
-
-    fn square() -> FloorPlan {
-        plan(&[(0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (0.0, 4.0)])
-    }
-
-    fn rectangle() -> FloorPlan {
-        plan(&[(0.0, 0.0), (5.0, 0.0), (5.0, 3.0), (0.0, 3.0)])
-    }
 
     /// Equation 7 by brute force: midpoint rule with `per_wall` samples per wall (f64),
     /// minimised over the symmetry rotations applied to the first transform.
@@ -300,7 +282,7 @@ mod tests {
     #[test]
     fn rms_radius_of_square_and_segment_formula() {
         // Square of side 2a centred: (1/L)∫|s|² = a² + a²/3 (each side: x² + y², y uniform).
-        let sq = square();
+        let sq = centred_rect(4.0, 4.0);
         let a = 2.0f32;
         let expect = sqrt(a * a + a * a / 3.0);
         assert!((perimeter_rms_radius(&sq) - expect).abs() < 1e-5);
@@ -312,9 +294,9 @@ mod tests {
     #[test]
     fn detected_orders() {
         let tol = SymmetryTolerance::default();
-        assert_eq!(PoseDistance::new(&square(), &tol).order(), 4);
-        assert_eq!(PoseDistance::new(&rectangle(), &tol).order(), 2);
-        assert_eq!(PoseDistance::new(&l_room(), &tol).order(), 1);
+        assert_eq!(PoseDistance::new(&centred_rect(4.0, 4.0), &tol).order(), 4);
+        assert_eq!(PoseDistance::new(&centred_rect(5.0, 3.0), &tol).order(), 2);
+        assert_eq!(PoseDistance::new(&l_room_6x4().centered(), &tol).order(), 1);
     }
 
     #[test]
@@ -326,7 +308,11 @@ mod tests {
             (Pose2::new(0.0, 0.0, 0.0), Pose2::new(0.0, 0.0, 1.2)),
             (Pose2::new(-2.0, 0.5, 0.7), Pose2::new(2.0, -0.5, -2.2)),
         ];
-        for p in [l_room(), square(), rectangle()] {
+        for p in [
+            l_room_6x4().centered(),
+            centred_rect(4.0, 4.0),
+            centred_rect(5.0, 3.0),
+        ] {
             let d = PoseDistance::new(&p, &tol);
             for (t1, t2) in &cases {
                 let num = integrate(&p, d.order(), t1, t2, 2000);
@@ -345,17 +331,17 @@ mod tests {
         let tol = SymmetryTolerance::default();
         let t = Pose2::new(0.5, 0.5, 0.2);
         let g = Pose2::new(0.5, 0.5, 0.2 + core::f32::consts::FRAC_PI_2);
-        assert!(PoseDistance::new(&square(), &tol).distance(&t, &g) < 1e-5);
-        let dr = PoseDistance::new(&rectangle(), &tol);
+        assert!(PoseDistance::new(&centred_rect(4.0, 4.0), &tol).distance(&t, &g) < 1e-5);
+        let dr = PoseDistance::new(&centred_rect(5.0, 3.0), &tol);
         assert!(dr.distance(&t, &g) > 1.0);
         let h = Pose2::new(0.5, 0.5, 0.2 + core::f32::consts::PI);
         assert!(dr.distance(&t, &h) < 1e-5);
-        assert!(PoseDistance::new(&l_room(), &tol).distance(&t, &h) > 1.0);
+        assert!(PoseDistance::new(&l_room_6x4().centered(), &tol).distance(&t, &h) > 1.0);
     }
 
     #[test]
     fn agent_helper_compares_inverses() {
-        let d = PoseDistance::new(&l_room(), &SymmetryTolerance::default());
+        let d = PoseDistance::new(&l_room_6x4().centered(), &SymmetryTolerance::default());
         let p1 = Pose2::new(1.0, -0.5, 0.3);
         // Same heading: the distance is the position error.
         let p2 = Pose2::new(1.03, -0.46, 0.3);
@@ -371,7 +357,7 @@ mod tests {
         let tol = SymmetryTolerance::default();
         let truth = Pose2::new(1.0, -0.5, 0.3);
         // L-shaped room (no symmetry): 3 cm east, 4 cm north, 0.4° off: 5 cm, inside.
-        let d = PoseDistance::new(&l_room(), &tol);
+        let d = PoseDistance::new(&l_room_6x4().centered(), &tol);
         let deg = core::f32::consts::PI / 180.0;
         let a = Pose2::new(1.03, -0.46, 0.3 + 0.4 * deg);
         let e = d.agent_errors(&a, &truth);
@@ -402,7 +388,7 @@ mod tests {
         let tol = SymmetryTolerance::default();
         let truth = Pose2::new(0.8, 0.3, -1.0);
         // A rectangle's half-turn twin, 2 cm off: right, and the error is the 2 cm.
-        let d = PoseDistance::new(&rectangle(), &tol);
+        let d = PoseDistance::new(&centred_rect(5.0, 3.0), &tol);
         let q = rotate(v2(truth.x + 0.02, truth.y), core::f32::consts::PI);
         let twin = Pose2::new(q.x, q.y, truth.theta + core::f32::consts::PI);
         let e = d.agent_errors(&twin, &truth);
@@ -413,7 +399,7 @@ mod tests {
         let q = rotate(v2(truth.x, truth.y), core::f32::consts::FRAC_PI_2);
         let quarter = Pose2::new(q.x, q.y, truth.theta + core::f32::consts::FRAC_PI_2);
         assert!(!Tolerance::SURVEYOR.admits(&d.agent_errors(&quarter, &truth)));
-        let ds = PoseDistance::new(&square(), &tol);
+        let ds = PoseDistance::new(&centred_rect(4.0, 4.0), &tol);
         let e = ds.agent_errors(&quarter, &truth);
         assert!(e.position < 1e-4 && e.heading < 1e-5, "{e:?}");
         // NaN is never right.
@@ -429,7 +415,8 @@ mod tests {
             x1 in -3.0f32..3.0, y1 in -3.0f32..3.0, a1 in -3.1f32..3.1,
             x2 in -3.0f32..3.0, y2 in -3.0f32..3.0, a2 in -3.1f32..3.1, pick in 0usize..3
         ) {
-            let p = [l_room(), square(), rectangle()][pick].clone();
+            let rooms = [l_room_6x4().centered(), centred_rect(4.0, 4.0), centred_rect(5.0, 3.0)];
+            let p = rooms[pick].clone();
             let d = PoseDistance::new(&p, &SymmetryTolerance::default());
             let (t1, t2) = (Pose2::new(x1, y1, a1), Pose2::new(x2, y2, a2));
             let r1 = d.representative(&t1);
@@ -451,7 +438,8 @@ mod tests {
             k in 0u8..4, pick in 0usize..2
         ) {
             // AgentPoses rotated by 2πk/n about the model origin are equivalent.
-            let (p, n) = [(square(), 4u8), (rectangle(), 2u8)][pick].clone();
+            let rooms = [(centred_rect(4.0, 4.0), 4u8), (centred_rect(5.0, 3.0), 2u8)];
+            let (p, n) = rooms[pick].clone();
             let d = PoseDistance::new(&p, &SymmetryTolerance::default());
             prop_assert_eq!(d.order(), n);
             let rot = TAU * (k % n) as f32 / n as f32;
@@ -468,7 +456,7 @@ mod tests {
     fn numerical_integration_property_sample() {
         // A denser sweep of random pose pairs on a non-trivial plan (deterministic).
         use rand_core::{RngCore, SeedableRng};
-        let p = plan(&[
+        let p = centred(&[
             (0.0, 0.0),
             (7.0, 0.0),
             (7.0, 1.5),

@@ -1,5 +1,5 @@
 //! The precision of a registered pose: the covariance of the AgentPose `(x, y, θ)` from the
-//! information matrix of the readings the pose explains (issue 20). What a surveyor reads
+//! information matrix of the readings the pose explains. What a surveyor reads
 //! as "± so many millimetres" next to the station's coordinates.
 //!
 //! At `pose`, reading `i` (encoder bearing `βᵢ`, model direction `dᵢ = R(h)·unit(βᵢ)`) hits
@@ -201,16 +201,8 @@ pub fn pose_covariance(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::world::floorplan::MAX_VERTICES;
+    use crate::fixtures::rect_about_origin;
     use core::f32::consts::{FRAC_PI_2, PI};
-
-    fn rect(w: f32, h: f32) -> FloorPlan {
-        let v: HVec<Vec2, MAX_VERTICES> = [(0.0, 0.0), (w, 0.0), (w, h), (0.0, h)]
-            .iter()
-            .map(|&(x, y)| v2(x - 0.5 * w, y - 0.5 * h))
-            .collect();
-        FloorPlan::new(&v).unwrap()
-    }
 
     fn obs_at(plan: &FloorPlan, pose: &Pose2, bearings: &[f32]) -> Observations {
         let mut o = Observations::new();
@@ -227,7 +219,7 @@ mod tests {
     fn perpendicular_walls_give_sigma_per_axis() {
         // Heading known, one reading onto the east wall, one onto the north wall, both
         // head-on: each fixes one coordinate to the range noise.
-        let plan = rect(12.0, 8.0);
+        let plan = rect_about_origin(12.0, 8.0);
         let pose = Pose2::new(1.0, -1.0, 0.0);
         let o = obs_at(&plan, &pose, &[0.0, FRAC_PI_2]);
         let c = pose_covariance(&plan, &o, &pose, true, 0.01, 0.1).unwrap();
@@ -244,7 +236,7 @@ mod tests {
 
     #[test]
     fn too_few_or_parallel_readings_have_no_precision() {
-        let plan = rect(12.0, 8.0);
+        let plan = rect_about_origin(12.0, 8.0);
         let pose = Pose2::new(1.0, -1.0, 0.3);
         let o = obs_at(&plan, &pose, &[0.0, 1.6]);
         assert_eq!(
@@ -276,7 +268,7 @@ mod tests {
 
     #[test]
     fn heading_unknown_readings_on_every_wall_determine_every_axis() {
-        let plan = rect(12.0, 8.0);
+        let plan = rect_about_origin(12.0, 8.0);
         let pose = Pose2::new(0.5, 0.5, 0.4);
         let o = obs_at(&plan, &pose, &[0.0, 1.2, 2.4, 3.6, 4.8]);
         let c = pose_covariance(&plan, &o, &pose, false, 0.01, 0.1).unwrap();

@@ -27,7 +27,7 @@
 //! near-symmetric rooms the mirrored mode explains the readings as well as the true one,
 //! and the belief has already weighed that ambiguity.
 //!
-//! **Cost (issue 22).** As first built ([`Search::Exhaustive`]) the refinement registered
+//! **Cost.** As first built ([`Search::Exhaustive`]) the refinement registered
 //! `1 + n + (n − 1)` hypotheses, each after a 9-heading sweep of ICPs run to a 10 µm
 //! tolerance, and re-ran the winner from the belief argmax with the full annealing; under
 //! the calibrated stop it ran from scratch after every reading past the gate. `cargo xtask
@@ -84,7 +84,7 @@
 //! at 7.9 M instructions mean, 33.7 M worst (`results/mcu-bench/`). The per-reading search,
 //! which the calibrated stop was fitted on, is unchanged.
 //!
-//! Tried and not taken: before issue 22, a 3-heading sweep instead of 9 (0.075 m mean pose
+//! Tried and not taken: with the exhaustive search, a 3-heading sweep instead of 9 (0.075 m mean pose
 //! error over recognised episodes, heuristic-1, K = 10, 1000 test plans) and starting the
 //! leave-out fits from the all-readings fit without a sweep (0.091 m), against 0.070 m; the
 //! sweep is kept, only shortened.
@@ -555,7 +555,7 @@ pub fn refine_after(
 /// Refinements of other belief modes an episode keeps ([`keep_alternate`]): when the
 /// argmax flips between two or three near-twins of a room (a near-symmetric plan the
 /// symmetry test does not call symmetric), each return re-fits from that mode's last
-/// refinement instead of searching afresh. Issue 22: on plan 1000002 (K = 10, int8 learnt
+/// refinement instead of searching afresh. Why: on plan 1000002 (K = 10, int8 learnt
 /// policy, calibrated stop) the argmax alternated between two cells 180° apart from the
 /// eighth reading on, and every flip was a fresh search, the worst update 55.3 M
 /// instructions at 32 readings. 3 × 60 bytes of RAM.
@@ -650,8 +650,8 @@ fn finish_from(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::fixtures::{centred_rect, l_room_8x6};
     use crate::localization::LocalizerConfig;
-    use crate::pipeline::tests::l_room;
     use crate::registration::Measurement;
     use crate::world::geometry::unit;
 
@@ -659,7 +659,7 @@ pub(crate) mod tests {
     /// registration is dragged off by it, the refinement leaves it out.
     #[test]
     fn an_outlier_among_three_readings_is_left_out() {
-        let plan = l_room();
+        let plan = l_room_8x6();
         let truth = Pose2::new(-1.2, -0.9, 0.3);
         // Model-frame rays at 0, 2.0 and 3.6 rad: the x = 8, y = 6 and x = 0 walls.
         let bearings = [-0.3f32, 1.7, 3.3];
@@ -756,14 +756,7 @@ pub(crate) mod tests {
     /// which keeps every pair, brings it back to the pose all five agree on.
     #[test]
     fn the_polish_recovers_the_reading_rejection_dropped() {
-        let plan = FloorPlan::new(&[
-            crate::world::geometry::v2(0.0, 0.0),
-            crate::world::geometry::v2(10.0, 0.0),
-            crate::world::geometry::v2(10.0, 6.0),
-            crate::world::geometry::v2(0.0, 6.0),
-        ])
-        .unwrap()
-        .centered();
+        let plan = centred_rect(10.0, 6.0);
         let truth = Pose2::new(1.0, 0.5, 0.0);
         let deg = core::f32::consts::PI / 180.0;
         let (obs, loc) = readings(
@@ -870,7 +863,7 @@ pub(crate) mod tests {
 
     #[test]
     fn range_fit_counts_explained_readings_and_bounds_an_outlier() {
-        let plan = l_room();
+        let plan = l_room_8x6();
         let pose = Pose2::new(0.5, -1.0, -0.4);
         let mut obs = Observations::new();
         for k in 0..4 {

@@ -36,8 +36,8 @@ pub fn register_multistart(
 }
 
 /// [`register_multistart`] with each sweep start's ICP cut at `sweep_iterations` (the
-/// sweep only picks the start of the annealing; issue 22 measured most of the
-/// refinement's cost in sweep ICPs run to a 10 µm tolerance), after which the `keep` best
+/// sweep only picks the start of the annealing, and sweep ICPs run to a 10 µm tolerance
+/// were most of the refinement's cost), after which the `keep` best
 /// starts are run on to convergence and the best of all is the annealing's start: a short
 /// sweep alone ranks some starts before they reach their basin. Never inlined: its pair
 /// buffer (14 KB) would stay in the caller's frame (`register_centred_with`).

@@ -1,4 +1,4 @@
-//! The calibrated stop (issue 12): an instrument has no ground truth, so it stops when the
+//! The calibrated stop: an instrument has no ground truth, so it stops when the
 //! *estimated probability that its registration is wrong* falls below the user's risk
 //! `P` ([`crate::episode::EpisodeConfig::stop_risk`], default 1 %).
 //!
@@ -19,7 +19,7 @@
 //! reaches [`GATE_PEAK_MASS`] (below it the instrument keeps measuring without running the
 //! refinement); the calibration data is gathered under the same gate.
 //!
-//! **Rivals** ([`rivals`], issue 21). What the belief cannot say well, whether another pose
+//! **Rivals** ([`rivals`]). What the belief cannot say well, whether another pose
 //! explains the readings as well as the answer, the range likelihood can: the strongest
 //! other belief modes are fitted too, and the likelihood margin of the answer over the best
 //! of them is a feature. With it the gate could come down from 0.5 to [`GATE_PEAK_MASS`]:
@@ -224,7 +224,7 @@ pub struct AgentTable {
 /// **Why a threshold table.** The estimate is calibrated per decision point, but the stop
 /// answers at the *first* point whose estimate falls below the threshold, and an episode
 /// offers many points: stopping at "estimate below P" gave 0.4 % wrong answers at P = 10 %
-/// with the heading known (issue 21), so a user who asked for 1 % paid for 0.1 %.
+/// with the heading known, so a user who asked for 1 % paid for 0.1 %.
 /// `activesense calibrate` therefore also measures, on its fitting episodes, the wrong
 /// answers of the first crossing for every threshold, and stores for each stated risk of
 /// [`STATED_RISKS`] the largest threshold whose first crossings (and every smaller

@@ -1,4 +1,4 @@
-//! Rival belief modes (issue 21): does anywhere else in the room explain the readings as
+//! Rival belief modes: does anywhere else in the room explain the readings as
 //! well as the answer does?
 //!
 //! The refinement fits the readings around the belief argmax only, so its own fit says how
@@ -164,7 +164,7 @@ fn modes_of(loc: &GhtLocalizer) -> HVec<Mode, { MAX_RIVALS + 2 }> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::tests::l_room;
+    use crate::fixtures::l_room_8x6;
     use crate::registration::refine::tests::{known_heading_input, readings};
     use crate::registration::AnnealParams;
 
@@ -173,7 +173,7 @@ mod tests {
     /// by how much it explains them better than the wrong one.
     #[test]
     fn a_rival_that_explains_the_readings_better_becomes_the_answer() {
-        let plan = l_room();
+        let plan = l_room_8x6();
         let truth = Pose2::new(-1.2, -0.9, 0.3);
         let (obs, loc) = readings(&plan, &truth, &[-0.3, 0.9, 1.7, 2.6, 3.3, 4.4]);
         let mut params = AnnealParams::default();

@@ -492,34 +492,12 @@ fn on_segment(a: Vec2, b: Vec2, p: Vec2) -> bool {
         && p.y <= a.y.max(b.y) + 1e-6
 }
 
-/// The 6 × 4 m L-room of the geometry and registration tests (the top-right 3 × 2 corner cut
-/// away), in its own frame: one room, so their hand-worked coordinates agree.
-#[cfg(test)]
-pub(crate) fn l_room_6x4() -> [Vec2; 6] {
-    [
-        v2(0.0, 0.0),
-        v2(6.0, 0.0),
-        v2(6.0, 2.0),
-        v2(3.0, 2.0),
-        v2(3.0, 4.0),
-        v2(0.0, 4.0),
-    ]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fixtures::{l_room_6x4, rect};
     use crate::world::geometry::unit;
     use core::f32::consts::{FRAC_PI_2, PI};
-
-    fn rect(w: f32, h: f32) -> FloorPlan {
-        FloorPlan::new(&[v2(0.0, 0.0), v2(w, 0.0), v2(w, h), v2(0.0, h)]).unwrap()
-    }
-
-    /// L-room: 6 x 4 with the top-right 3 x 2 corner cut away.
-    fn l_room() -> FloorPlan {
-        FloorPlan::new(&l_room_6x4()).unwrap()
-    }
 
     #[test]
     fn rejects_invalid() {
@@ -610,7 +588,7 @@ mod tests {
 
     #[test]
     fn ray_cast_l_room_occlusion() {
-        let l = l_room();
+        let l = l_room_6x4();
         // From the lower arm looking up-right at 45°, the ray hits the inner wall x = 3.
         let o = v2(1.0, 1.0);
         let d = unit(PI / 4.0);
@@ -657,7 +635,7 @@ mod tests {
 
     #[test]
     fn topological_scan_occlusion() {
-        let l = l_room();
+        let l = l_room_6x4();
         // From (5, 1) the far upper-left corner (0, 4) is hidden behind the notch, but the
         // inner corner (3, 2) is visible. Bearing toward (0, 4):
         let o = v2(5.0, 1.0);

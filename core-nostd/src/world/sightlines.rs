@@ -69,7 +69,6 @@ mod tests {
                 v2(r * libm::cosf(a), r * libm::sinf(a))
             })
             .collect();
-        let l = crate::world::floorplan::l_room_6x4();
         let mut comb: heapless::Vec<Vec2, MAX_VERTICES> = heapless::Vec::new();
         let _ = comb.push(v2(0.0, 0.0));
         let _ = comb.push(v2(10.0, 0.0));
@@ -82,7 +81,7 @@ mod tests {
         }
         let plans = [
             FloorPlan::new(&star).unwrap(),
-            FloorPlan::new(&l).unwrap(),
+            crate::fixtures::l_room_6x4(),
             FloorPlan::new(&comb[..comb.len() - 2]).unwrap(),
         ];
         let mut seed = 0x1234_5678u32;

@@ -107,14 +107,10 @@ pub fn symmetry_order(plan: &FloorPlan, tol: &SymmetryTolerance) -> u8 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fixtures::{l_room_6x4, polygon};
     use crate::world::geometry::{rotate, v2, Vec2};
     use crate::world::math::{cos, sin, TAU};
     use proptest::prelude::*;
-
-    fn plan(pts: &[(f32, f32)]) -> FloorPlan {
-        let v: HVec<Vec2, MAX_VERTICES> = pts.iter().map(|&(x, y)| v2(x, y)).collect();
-        FloorPlan::new(&v).unwrap()
-    }
 
     fn regular(n: usize, r: f32, phase: f32) -> FloorPlan {
         let v: HVec<Vec2, MAX_VERTICES> = (0..n)
@@ -132,7 +128,7 @@ mod tests {
 
     #[test]
     fn chain_of_rectangle() {
-        let c = edge_chain(&plan(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (0.0, 2.0)]));
+        let c = edge_chain(&polygon(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (0.0, 2.0)]));
         assert_eq!(c.len(), 4);
         for l in &c {
             assert!(abs(l.angle - PI / 2.0) < 1e-6);
@@ -140,48 +136,34 @@ mod tests {
         assert_eq!(c[0].length, 4.0);
         assert_eq!(c[1].length, 2.0);
         // L-room: the notch vertex is reflex (270°).
-        let l = edge_chain(&plan(&[
-            (0.0, 0.0),
-            (6.0, 0.0),
-            (6.0, 2.0),
-            (3.0, 2.0),
-            (3.0, 4.0),
-            (0.0, 4.0),
-        ]));
+        let l = edge_chain(&l_room_6x4());
         assert!(abs(l[3].angle - 1.5 * PI) < 1e-6);
         assert!(abs(l[2].angle - 0.5 * PI) < 1e-6);
     }
 
     #[test]
     fn canonical_shapes() {
-        let square = plan(&[(0.0, 0.0), (3.0, 0.0), (3.0, 3.0), (0.0, 3.0)]);
+        let square = polygon(&[(0.0, 0.0), (3.0, 0.0), (3.0, 3.0), (0.0, 3.0)]);
         assert_eq!(symmetry_order(&square, &tol()), 4);
-        let rect = plan(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.5), (0.0, 2.5)]);
+        let rect = polygon(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.5), (0.0, 2.5)]);
         assert_eq!(symmetry_order(&rect, &tol()), 2);
-        let l_room = plan(&[
-            (0.0, 0.0),
-            (6.0, 0.0),
-            (6.0, 2.0),
-            (3.0, 2.0),
-            (3.0, 4.0),
-            (0.0, 4.0),
-        ]);
+        let l_room = l_room_6x4();
         assert_eq!(symmetry_order(&l_room, &tol()), 1);
         assert_eq!(symmetry_order(&regular(6, 3.0, 0.3), &tol()), 6);
         assert_eq!(symmetry_order(&regular(5, 3.0, 0.0), &tol()), 5);
         assert_eq!(symmetry_order(&regular(3, 3.0, 0.0), &tol()), 3);
         // A rhombus (not a square) is C2.
-        let rhombus = plan(&[(0.0, 0.0), (4.0, 0.0), (6.0, 3.0), (2.0, 3.0)]);
+        let rhombus = polygon(&[(0.0, 0.0), (4.0, 0.0), (6.0, 3.0), (2.0, 3.0)]);
         assert_eq!(symmetry_order(&rhombus, &tol()), 2);
         // A kite (mirror symmetric only) has no proper symmetry.
-        let kite = plan(&[(0.0, -1.0), (3.0, 0.0), (0.0, 1.0), (-1.0, 0.0)]);
+        let kite = polygon(&[(0.0, -1.0), (3.0, 0.0), (0.0, 1.0), (-1.0, 0.0)]);
         assert_eq!(symmetry_order(&kite, &tol()), 1);
     }
 
     #[test]
     fn plus_shaped_room_is_c4_and_z_room_c2() {
         // Plus / cross-shaped room: 12 vertices, C4.
-        let plus = plan(&[
+        let plus = polygon(&[
             (1.0, -3.0),
             (1.0, -1.0),
             (3.0, -1.0),
@@ -197,7 +179,7 @@ mod tests {
         ]);
         assert_eq!(symmetry_order(&plus, &tol()), 4);
         // Z / S-shaped room: C2 (point symmetric), not mirror symmetric.
-        let z = plan(&[
+        let z = polygon(&[
             (0.0, 0.0),
             (4.0, 0.0),
             (4.0, 2.0),
@@ -218,13 +200,13 @@ mod tests {
         };
         // Rectangle 4 x 2 with one side stretched by 1 % (a trapezoid-ish quad whose
         // angles change by ~0.005 rad): still C2 within 2 %.
-        let near = plan(&[(0.0, 0.0), (4.0, 0.0), (4.01, 2.0), (0.0, 2.0)]);
+        let near = polygon(&[(0.0, 0.0), (4.0, 0.0), (4.01, 2.0), (0.0, 2.0)]);
         assert_eq!(symmetry_order(&near, &t), 2);
         // 5 cm off: length 4.05 vs 4 is 1.2 % but the angles change by 0.025 rad > 0.02.
-        let far = plan(&[(0.0, 0.0), (4.0, 0.0), (4.05, 2.0), (0.0, 2.0)]);
+        let far = polygon(&[(0.0, 0.0), (4.0, 0.0), (4.05, 2.0), (0.0, 2.0)]);
         assert_eq!(symmetry_order(&far, &t), 1);
         // Near-square 3 x 3.04 (1.3 % longer): C4 within 2 %, only C2 within 1 %.
-        let sq = plan(&[(0.0, 0.0), (3.0, 0.0), (3.0, 3.04), (0.0, 3.04)]);
+        let sq = polygon(&[(0.0, 0.0), (3.0, 0.0), (3.0, 3.04), (0.0, 3.04)]);
         assert_eq!(symmetry_order(&sq, &t), 4);
         let strict = SymmetryTolerance {
             angle: 0.02,
@@ -258,9 +240,9 @@ mod tests {
         ) {
             let shapes = [
                 regular(n, 2.5, 0.1),
-                plan(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.5), (0.0, 2.5)]),
-                plan(&[(0.0, 0.0), (6.0, 0.0), (6.0, 2.0), (3.0, 2.0), (3.0, 4.0), (0.0, 4.0)]),
-                plan(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (6.0, 2.0), (6.0, 4.0), (2.0, 4.0),
+                polygon(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.5), (0.0, 2.5)]),
+                l_room_6x4(),
+                polygon(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (6.0, 2.0), (6.0, 4.0), (2.0, 4.0),
                        (2.0, 2.0), (0.0, 2.0)]),
             ];
             let expect = [n as u8, 2, 1, 2][pick];

@@ -60,10 +60,3 @@ impl Dot for Portable {
         acc
     }
 }
-
-/// The backend the network runs: the DSP kernels on the Cortex-M4, [`Portable`] elsewhere.
-#[cfg(target_arch = "arm")]
-pub type Fast = super::dsp::Dsp;
-/// The backend the network runs: the DSP kernels on the Cortex-M4, [`Portable`] elsewhere.
-#[cfg(not(target_arch = "arm"))]
-pub type Fast = Portable;

@@ -9,7 +9,7 @@
 //! Everything lives on the stack (about 25 KB at its deepest: a [`Scratch`] and the
 //! reference's activations; each check has its own frame); nothing panics: a difference is a [`Mismatch`].
 
-use super::dot::{Dot, Fast, Portable};
+use super::dot::{Dot, Portable};
 use super::fast::{self, ConvOut, ConvWork};
 use super::kernels::{conv3x3_s2_p1, fully_connected_i8};
 use super::*;

@@ -2,6 +2,16 @@
 //! (Algorithm 3, with the heading sweep): correspondences on feasible walls, outlier
 //! rejection, the closed-form solve, acceleration and the trust region. The overview is
 //! in [`crate::registration`].
+//!
+//! This file holds the parameters and results, the closed-form solve and the ICP loop;
+//! `correspond` finds and rejects the pairs, `anneal` runs Algorithm 3 around the loop.
+
+mod anneal;
+mod correspond;
+
+pub(super) use anneal::register_centred_with;
+pub use anneal::{register, register_centred};
+pub(super) use correspond::match_pairs;
 
 use super::*;
 use crate::limits::MAX_VERTICES;
@@ -221,211 +231,11 @@ pub(super) struct Pair {
 
 pub(super) type Pairs = HVec<Pair, MAX_OBSERVATIONS>;
 
-/// Correspondence for one observation at AgentPose `pose`: the nearest point on a feasible
-/// wall (facing the ray, incidence within `cos_max`, visible from the instrument), else the
-/// plain nearest point with weight `relaxed_w`.
-fn correspond(
-    (plan, sight): (&FloorPlan, &Sightlines),
-    o: &ObsPoint,
-    pose: &Pose2,
-    (sin_h, cos_h): (f32, f32),
-    cos_max: f32,
-    relaxed_w: f32,
-) -> Pair {
-    let origin = pose.translation(); // the instrument, in the model frame
-                                     // `pose.transform(o.s)` and `pose.rotate_dir(o.d)` with the heading's sine and cosine
-                                     // taken once per pose (libm's are software routines on the M4F; the same bits).
-    let rot = |v: Vec2| v2(cos_h * v.x - sin_h * v.y, sin_h * v.x + cos_h * v.y);
-    let p = rot(o.s) + origin;
-    let d = rot(o.d);
-    let n = plan.len().min(MAX_VERTICES);
-    // The walls facing the ray within the incidence limit, with their nearest points, in
-    // wall order; the correspondent is the nearest of them that is visible (the first on
-    // equal distances), else the nearest point of any wall. Written as one pass over the
-    // walls and then visibility tests in order of distance (a wall's facing does not
-    // depend on `p`): the same pairs as scanning every wall again after each hidden one.
-    //
-    // Distances are compared squared and the facing test is made on the unnormalised
-    // normal: on the M4F, libm's `sqrtf` is a software routine, and two of them per wall
-    // were most of a correspondence's cost. The square root is taken for the chosen wall.
-    let mut feasible = [(0.0f32, v2(0.0, 0.0), 0u8); MAX_VERTICES];
-    let mut nf = 0usize;
-    let cos2 = cos_max * cos_max;
-    for i in 0..n {
-        let (a, b) = plan.wall(i);
-        let e = b - a;
-        // d · (outward normal × |e|), the normal being `e` turned right.
-        let c = d.x * e.y - d.y * e.x;
-        if c > 0.0 && (cos_max <= 0.0 || c * c >= cos2 * (e.x * e.x + e.y * e.y)) {
-            let q = closest_on_segment(p, a, b);
-            let r = p - q;
-            feasible[nf] = (r.x * r.x + r.y * r.y, q, i as u8);
-            nf += 1;
-        }
-    }
-    let mut tried: u64 = 0;
-    loop {
-        let mut best: Option<usize> = None;
-        for (k, f) in feasible[..nf].iter().enumerate() {
-            if tried & (1u64 << k) == 0 && best.is_none_or(|b| f.0 < feasible[b].0) {
-                best = Some(k);
-            }
-        }
-        let Some(k) = best else { break };
-        let (d2, m, i) = feasible[k];
-        // `plan.visible(origin, m, VISIBILITY_TOLERANCE)`, the viewpoint's walls worked out
-        // once per pass.
-        if sight.visible(m, VISIBILITY_TOLERANCE) {
-            let nrm = plan.outward_normal(i as usize);
-            return Pair {
-                m,
-                s: o.s,
-                dist: sqrt(d2),
-                weight: d.x * nrm.x + d.y * nrm.y,
-                relaxed: false,
-                inlier: true,
-            };
-        }
-        tried |= 1u64 << k;
-    }
-    let mut any: Option<(Vec2, f32)> = None;
-    for i in 0..n {
-        let (a, b) = plan.wall(i);
-        let q = closest_on_segment(p, a, b);
-        let r = p - q;
-        let d2 = r.x * r.x + r.y * r.y;
-        if any.is_none_or(|(_, e)| d2 < e) {
-            any = Some((q, d2));
-        }
-    }
-    let any = any.map(|(q, d2)| (q, sqrt(d2)));
-    match any {
-        Some((m, dist)) => Pair {
-            m,
-            s: o.s,
-            dist,
-            weight: relaxed_w,
-            relaxed: true,
-            inlier: true,
-        },
-        // A valid plan has at least three walls.
-        None => Pair {
-            m: p,
-            s: o.s,
-            dist: 0.0,
-            weight: 0.0,
-            relaxed: true,
-            inlier: false,
-        },
-    }
-}
-
 impl IcpParams {
     /// `cos(max_incidence)`, the correspondences' facing limit: taken once per fit, not
     /// per iteration (libm's `cosf` is a software double-precision routine on the M4F).
     pub(super) fn cos_max_incidence(&self) -> f32 {
         cos(self.max_incidence)
-    }
-}
-
-/// Pair counts up to this sort their distances in a 128-byte buffer, not a 2 KB one.
-const SHORT_SORT: usize = 32;
-
-/// The `keep`-th smallest pair distance and the (lower) median, `0` for none, from a
-/// buffer of `N` that fits the pairs: zeroing one of `MAX_OBSERVATIONS` (2 KB) per
-/// correspondence pass was 2 % of a K = 10 episode's instructions on the device, and the
-/// calibrated stop's fits rarely have more than [`SHORT_SORT`] readings. Its own frame
-/// (`inline(never)`), so the correspondences' frame does not hold the buffer.
-#[inline(never)]
-fn order_statistics<const N: usize>(pairs: &Pairs, keep: usize) -> (f32, f32) {
-    let n = pairs.len().min(N);
-    let mut sorted = [0.0f32; N];
-    for (k, p) in pairs.iter().take(n).enumerate() {
-        sorted[k] = p.dist;
-    }
-    let sorted = &mut sorted[..n];
-    sorted.sort_unstable_by(|a, b| a.total_cmp(b));
-    let threshold = if keep == 0 {
-        0.0
-    } else {
-        sorted[keep.min(n) - 1]
-    };
-    let median = if n == 0 { 0.0 } else { sorted[(n - 1) / 2] };
-    (threshold, median)
-}
-
-/// Correspondences + outlier rejection at `pose`; returns `E` and counts. `heading` is a
-/// turn by `pose.theta` or its negative where the caller has one (else any: it is then
-/// recomputed), `cos_max` is [`IcpParams::cos_max_incidence`].
-pub(super) fn match_pairs(
-    plan: &FloorPlan,
-    obs: &Observations,
-    (pose, heading): (&Pose2, Turn),
-    (params, cos_max): (&IcpParams, f32),
-    pairs: &mut Pairs,
-) -> ErrorSummary {
-    pairs.clear();
-    let sc = heading.to(pose.theta).sin_cos();
-    let sight = Sightlines::new(plan, pose.translation());
-    for (i, o) in obs.pts.iter().enumerate() {
-        if params.excludes(i) {
-            continue;
-        }
-        // Same capacity as the observation set.
-        let _ = pairs.push(correspond(
-            (plan, &sight),
-            o,
-            pose,
-            sc,
-            cos_max,
-            params.relaxed_weight,
-        ));
-    }
-    let n = pairs.len();
-    // Percentile threshold on the distances.
-    let keep = {
-        let k = (params.keep_fraction * n as f32 + 0.999) as usize;
-        k.max(params.min_pairs.max(2) as usize).min(n)
-    };
-    let (threshold, median) = if n <= SHORT_SORT {
-        order_statistics::<SHORT_SORT>(pairs, keep)
-    } else {
-        order_statistics::<MAX_OBSERVATIONS>(pairs, keep)
-    };
-    let floor = params
-        .reject_min_distance
-        .max(params.reject_median_factor * median);
-    // A rejected pair counts in the score as if it lay at the rejection boundary.
-    let cap = threshold.max(floor);
-    let (mut sw, mut swd2, mut sw_all, mut trunc) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-    let (mut inliers, mut relaxed) = (0u16, 0u16);
-    for p in pairs.iter_mut() {
-        p.inlier = p.weight > 0.0 && (p.dist <= threshold || p.dist <= floor);
-        relaxed += p.relaxed as u16;
-        sw_all += p.weight;
-        if p.inlier {
-            inliers += 1;
-            sw += p.weight;
-            swd2 += p.weight * p.dist * p.dist;
-        } else {
-            trunc += p.weight * cap * cap;
-        }
-    }
-    let error = if sw > 0.0 {
-        sqrt(swd2 / sw)
-    } else {
-        f32::INFINITY
-    };
-    let score = if sw_all > 0.0 {
-        sqrt((swd2 + trunc) / sw_all)
-    } else {
-        f32::INFINITY
-    };
-    ErrorSummary {
-        error,
-        score,
-        inliers,
-        relaxed,
     }
 }
 
@@ -618,173 +428,20 @@ pub(super) fn icp_inner(
     }
 }
 
-/// Annealed sparse registration (Algorithm 3) from the AgentPose `initial` (the coarse
-/// localizer's estimate) against the centred `plan`.
-pub fn register(
-    plan: &FloorPlan,
-    obs: &Observations,
-    initial: &Pose2,
-    params: &AnnealParams,
-) -> Result<Registration, RegistrationError> {
-    register_centred(plan, obs, initial, initial, params)
-}
-
-/// [`register`] from `initial`, with the trust region centred on `centre` (the refinement
-/// starts its final annealing from the screened winner, inside the belief's trust region).
-#[inline(never)]
-pub fn register_centred(
-    plan: &FloorPlan,
-    obs: &Observations,
-    initial: &Pose2,
-    centre: &Pose2,
-    params: &AnnealParams,
-) -> Result<Registration, RegistrationError> {
-    register_centred_with(plan, obs, initial, centre, params, &mut Pairs::new())
-}
-// The functions that hold a pair buffer (14 KB) are never inlined: inlined, the buffer
-// stays in the caller's frame for the caller's whole run, and the refinement's callers
-// nest (track → refine → hypothesis → sweep): on the device's 42 KB stack three such
-// frames left a few hundred bytes (README, "What is not done yet").
-
-/// [`register_centred`] with the caller's pair buffer: `MAX_OBSERVATIONS` pairs are 14 KB,
-/// and the heading sweep that ends in this annealing already holds one; two on the
-/// device's 42 KB stack left it a few hundred bytes (README, "What is not done yet").
-/// The buffer is scratch: every correspondence pass clears it first.
-pub(super) fn register_centred_with(
-    plan: &FloorPlan,
-    obs: &Observations,
-    initial: &Pose2,
-    centre: &Pose2,
-    params: &AnnealParams,
-    pairs: &mut Pairs,
-) -> Result<Registration, RegistrationError> {
-    let icp = &params.icp;
-    check_inputs(obs, initial, icp)?;
-    let gains_ok = [
-        params.min_error,
-        params.translation_gain,
-        params.rotation_gain,
-        params.max_sigma_translation,
-        params.max_sigma_rotation,
-    ]
-    .iter()
-    .all(|g| g.is_finite() && *g >= 0.0);
-    if !gains_ok {
-        return Err(RegistrationError::InvalidParams);
-    }
-    let mut rng = GaussianRng::new(params.seed);
-    let mut pose = *initial;
-    let cos_max = icp.cos_max_incidence();
-    let mut summary = match_pairs(
-        plan,
-        obs,
-        (&pose, Turn::new(pose.theta)),
-        (icp, cos_max),
-        pairs,
-    );
-    let mut iterations = 0u16;
-    let sigmas = |e: f32| {
-        let r = if e.is_finite() { sqrt(e) } else { 1.0 };
-        let st = (params.translation_gain * r).min(params.max_sigma_translation);
-        let sr = if icp.fixed_heading {
-            0.0
-        } else {
-            (params.rotation_gain * r).min(params.max_sigma_rotation)
-        };
-        (st, sr)
-    };
-    let (mut sigma_t, mut sigma_r) = sigmas(summary.score);
-    let mut rounds = 0u16;
-    let mut stale = 0u8;
-    let mut converged = false;
-    while rounds < params.max_rounds {
-        if summary.score <= params.min_error || stale >= params.patience {
-            converged = true;
-            break;
-        }
-        rounds += 1;
-        // Perturbations j = 1..=M around the estimate; j = 0 is the estimate itself.
-        let mut pick = (pose, summary);
-        for _ in 0..params.perturbations {
-            let cand = Pose2::new(
-                pose.x + sigma_t * rng.normal(),
-                pose.y + sigma_t * rng.normal(),
-                pose.theta + sigma_r * rng.normal(),
-            );
-            if !in_trust_region(&cand, centre, icp) {
-                continue;
-            }
-            let s = match_pairs(
-                plan,
-                obs,
-                (&cand, Turn::new(cand.theta)),
-                (icp, cos_max),
-                pairs,
-            );
-            if s.score < pick.1.score {
-                pick = (cand, s);
-            }
-        }
-        let refined = icp_inner(plan, obs, &pick.0, centre, icp, pairs);
-        iterations = iterations.saturating_add(refined.iterations);
-        let next = if refined.score < pick.1.score {
-            (
-                refined.pose,
-                ErrorSummary {
-                    error: refined.error,
-                    score: refined.score,
-                    inliers: refined.inliers,
-                    relaxed: refined.relaxed,
-                },
-            )
-        } else {
-            pick
-        };
-        // Improvement test with a small relative margin so float jitter does not reset it.
-        if next.1.score < summary.score * (1.0 - 1e-4) {
-            stale = 0;
-        } else {
-            stale = stale.saturating_add(1);
-        }
-        if next.1.score <= summary.score {
-            pose = next.0;
-            summary = next.1;
-        }
-        (sigma_t, sigma_r) = sigmas(summary.score);
-    }
-    if !converged && (summary.score <= params.min_error || stale >= params.patience) {
-        converged = true;
-    }
-    Ok(Registration {
-        pose,
-        error: summary.error,
-        score: summary.score,
-        inliers: summary.inliers,
-        relaxed: summary.relaxed,
-        iterations,
-        rounds,
-        converged,
-    })
-}
-
 #[cfg(test)]
 mod tests {
+    use super::correspond::correspond;
     use super::*;
+    use crate::fixtures::{centred, centred_rect, l_room_6x4};
     use crate::registration::fits::{min_eigen_2x2, min_eigen_3x3};
-    use crate::world::floorplan::MAX_VERTICES;
     use crate::world::math::wrap_positive;
     use core::f32::consts::PI;
     use proptest::prelude::*;
 
-    fn plan(pts: &[(f32, f32)]) -> FloorPlan {
-        let v: HVec<Vec2, MAX_VERTICES> = pts.iter().map(|&(x, y)| v2(x, y)).collect();
-        FloorPlan::new(&v).unwrap().centered()
-    }
-
     #[test]
     fn observability_flags_a_one_wall_fan_and_passes_a_spread_set() {
         // A 8 m x 6 m room, instrument at the centre facing +x (AgentPose heading 0).
-        let room = plan(&[(0.0, 0.0), (8.0, 0.0), (8.0, 6.0), (0.0, 6.0)]);
+        let room = centred_rect(8.0, 6.0);
         let pose = Pose2::new(0.0, 0.0, 0.0);
         let obs_of = |bearings: &[f32]| {
             let v: HVec<Measurement, 16> =
@@ -828,17 +485,9 @@ mod tests {
     /// Asymmetric test rooms (model frame, centred).
     fn rooms() -> [FloorPlan; 3] {
         [
-            // L-room 6 x 4.
-            plan(&[
-                (0.0, 0.0),
-                (6.0, 0.0),
-                (6.0, 2.0),
-                (3.0, 2.0),
-                (3.0, 4.0),
-                (0.0, 4.0),
-            ]),
+            l_room_6x4().centered(),
             // Irregular heptagon with a chamfer.
-            plan(&[
+            centred(&[
                 (0.0, 0.0),
                 (7.0, 0.0),
                 (7.0, 1.5),
@@ -848,7 +497,7 @@ mod tests {
                 (0.0, 5.0),
             ]),
             // Skewed quadrilateral.
-            plan(&[(0.0, 0.0), (5.5, 0.5), (6.0, 4.0), (0.5, 3.0)]),
+            centred(&[(0.0, 0.0), (5.5, 0.5), (6.0, 4.0), (0.5, 3.0)]),
         ]
     }
 
@@ -944,7 +593,7 @@ mod tests {
     #[test]
     fn correspondences_respect_the_incidence_constraints() {
         // Rectangle 4 x 2 centred: x in [-2, 2], y in [-1, 1].
-        let r = plan(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (0.0, 2.0)]);
+        let r = centred(&[(0.0, 0.0), (4.0, 0.0), (4.0, 2.0), (0.0, 2.0)]);
         let params = IcpParams::default();
         let cos_max = cos(params.max_incidence);
         // Measurement just outside the right wall but the ray points left (-x): the right
@@ -1001,7 +650,7 @@ mod tests {
         assert!((pr.m - v2(2.0, 0.0)).norm() < 1e-5 && (pr.dist - 0.1).abs() < 1e-5);
         // L-room, instrument in the lower arm: the nearest wall to the observation is the
         // hidden upper-arm wall, the visible constrained match is the far one.
-        let room = FloorPlan::new(&crate::world::floorplan::l_room_6x4()).unwrap();
+        let room = l_room_6x4();
         let (l, c) = (room.centered(), room.perimeter_centroid());
         // Original coordinates: instrument at (5, 1) in the lower arm, observation at
         // (2.5, 3.9) near the top wall of the upper arm. The top wall (0.1 away) faces the
