@@ -55,7 +55,7 @@ fn main() -> anyhow::Result<()> {
     .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let r = outcome.result;
     println!(
-        "{} readings; station (room frame) {:?}; stated risk {:?}",
+        "{} steps; station (room frame) {:?}; stated risk {:?}",
         outcome.steps.len(),
         r.refined.map(|g| g.pose),
         r.stop_risk

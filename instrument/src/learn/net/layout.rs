@@ -1,8 +1,10 @@
 //! The network's shape: [`NetShape`] (the two input sizes) and the [`Layer`] table that
 //! places every layer's weights and biases in the flat parameter vector (the layout the
-//! module doc of [`super`] describes; the policy file and the int8 quantiser read it too).
+//! module doc of [`super`] describes; the policy file and the int8 quantiser read it too),
+//! derived from the core's graph of the architecture (`int8::layer_dims`).
 
-use super::{C1, C2, FLAT, GRID, HIDDEN, KK, MAX_ROT_BINS, N_ACTIONS, N_LAYERS, P0, S1, S2};
+use super::{ARCH_ID, KK, L_SIDE, MAX_ROT_BINS, N_LAYERS, P0};
+use activesense_core::policy::int8;
 use std::ops::Range;
 
 /// Input sizes of a network; everything else is fixed by the architecture.
@@ -80,22 +82,36 @@ impl NetShape {
 
     /// The layers in parameter order (an array, so the hot paths can call it freely).
     pub fn layers(&self) -> [Layer; N_LAYERS] {
-        let conv = |in_ch, out_ch, in_size, out_size| LayerKind::Conv {
-            in_ch,
-            out_ch,
-            in_size,
-            out_size,
-        };
-        let lin = |inputs, outputs| LayerKind::Linear { inputs, outputs };
-        let specs = [
-            ("conv1", conv(self.rot_bins, C1, GRID, S1), true),
-            ("conv2", conv(C1, C2, S1, S2), true),
-            ("fc_belief", lin(FLAT, HIDDEN), true),
-            ("fc_side", lin(self.side, HIDDEN), true),
-            ("fc_joint", lin(2 * HIDDEN, HIDDEN), true),
-            ("actor", lin(HIDDEN, N_ACTIONS), false),
-            ("critic", lin(HIDDEN, 1), false),
+        const NAMES: [&str; N_LAYERS] = [
+            "conv1",
+            "conv2",
+            "fc_belief",
+            "fc_side",
+            "fc_joint",
+            "actor",
+            "critic",
         ];
+        // The core's graph for K planes; the side input's length is the shape's (the
+        // tests vary it).
+        let graph = int8::layer_dims(ARCH_ID, self.rot_bins).expect("the core knows ARCH_ID");
+        let mut i = 0;
+        let specs = graph.map(|d| {
+            let inputs = if i == L_SIDE { self.side } else { d.inputs };
+            let kind = match d.kind {
+                int8::LayerKind::Conv => LayerKind::Conv {
+                    in_ch: inputs,
+                    out_ch: d.outputs,
+                    in_size: d.in_size,
+                    out_size: d.out_size,
+                },
+                int8::LayerKind::FullyConnected => LayerKind::Linear {
+                    inputs,
+                    outputs: d.outputs,
+                },
+            };
+            i += 1;
+            (NAMES[i - 1], kind, d.relu)
+        });
         let mut offset = 0;
         specs.map(|(name, kind, relu)| {
             let (weight_len, bias_len) = match kind {

@@ -47,19 +47,22 @@ mod network;
 mod sample;
 
 pub use adam::{clip_global_norm, Adam};
+use activesense_core::policy::int8;
 pub use kernels::guided_relu_mask;
 pub use layout::{Layer, LayerKind, NetShape};
 pub use loss::{entropy, entropy_grad, log_prob_grad, log_softmax, softmax};
 pub use network::{Activations, BatchCache, Output, PolicyNet, Scratch};
 
-/// Architecture id written in policy files.
-pub const ARCH_ID: u16 = 2;
+/// Architecture id written in policy files: the core's `conv8-4-fc32`, whose graph
+/// ([`int8::layer_dims`]) this network's layers are derived from, so the float network the
+/// host trains and the int8 one the instrument runs have one definition.
+pub const ARCH_ID: u16 = int8::ARCH_CONV8_4_FC32;
 /// Human-readable architecture name.
 pub const ARCH_NAME: &str = "conv8-4-fc32";
 /// Side of the square belief map (cells).
-pub const GRID: usize = 30;
+pub const GRID: usize = activesense_core::policy::BELIEF_SIDE;
 /// Largest supported number of rotation bins `K` (belief planes).
-pub const MAX_ROT_BINS: usize = 10;
+pub const MAX_ROT_BINS: usize = activesense_core::limits::MAX_ROT_BINS;
 /// Actions: 0 rotate-left, 1 rotate-right, 2 measure.
 pub const N_ACTIONS: usize = 3;
 /// Samples per gradient chunk. Fixed (not derived from the thread count) so the summation
@@ -72,15 +75,20 @@ pub const CONV_STRIDE: usize = 2;
 /// Convolution zero padding.
 pub const CONV_PAD: usize = 1;
 
-const C1: usize = 8;
-const C2: usize = 4;
-const S1: usize = 15; // conv1 output side: (30 + 2 - 3) / 2 + 1
-const S2: usize = 8; // conv2 output side: (15 + 2 - 3) / 2 + 1
+/// The core's graph for this architecture (K = 1; K only changes conv1's inputs).
+const GRAPH: [int8::LayerDims; N_LAYERS] = match int8::layer_dims(ARCH_ID, 1) {
+    Some(g) => g,
+    None => panic!("the core knows this architecture"),
+};
+const C1: usize = GRAPH[L_CONV1].outputs;
+const C2: usize = GRAPH[L_CONV2].outputs;
+const S1: usize = GRAPH[L_CONV1].out_size;
+const S2: usize = GRAPH[L_CONV2].out_size;
 const P0: usize = GRID * GRID;
 const P1: usize = S1 * S1;
 const P2: usize = S2 * S2;
 const FLAT: usize = C2 * P2;
-const HIDDEN: usize = 32;
+const HIDDEN: usize = GRAPH[L_BELIEF].outputs;
 const KK: usize = CONV_KERNEL * CONV_KERNEL;
 
 // One sample's kept activations (all post-ReLU), back to back: conv1 | conv2 | fc_belief |
@@ -99,7 +107,10 @@ const L_JOINT: usize = 4;
 const L_ACTOR: usize = 5;
 const L_CRITIC: usize = 6;
 /// Number of layers.
-pub const N_LAYERS: usize = 7;
+pub const N_LAYERS: usize = int8::N_LAYERS;
+
+const _: () = assert!(GRAPH[L_BELIEF].inputs == FLAT && GRAPH[L_CONV1].in_size == GRID);
+const _: () = assert!(GRAPH[L_ACTOR].outputs == N_ACTIONS && GRAPH[L_CRITIC].outputs == 1);
 
 #[cfg(test)]
 mod tests;
