@@ -1,4 +1,4 @@
-//! What the instrument answers, through the binary (issue 20): `episode --plan` on a
+//! What the instrument answers, through the binary: `episode --plan` on a
 //! national-grid JSON and on a millimetre DXF gives the station in the file's coordinates
 //! and units, checked against poses computed here by hand; a symmetric room with the
 //! heading unknown is ambiguous with both twins, and `--heading-hint` resolves it; a hall

@@ -1,4 +1,4 @@
-//! The small things a user trips on (issue 20, item 6), each through the real binary: a
+//! The small things a user trips on , each through the real binary: a
 //! closed stdout, an unwritable `--out`, `plan --json` read back by `--plan`, the
 //! `--termination` values in `--help`, a negative `--stop-risk`, and link errors in words.
 

@@ -1,4 +1,4 @@
-//! The screened refinement (issue 22, `Search::Screened`) and the one the pipeline keeps
+//! The screened refinement (`Search::Screened`) and the one the pipeline keeps
 //! after every reading past the stop gate (`Budget::per_reading`: at K = 10 carried from
 //! the previous reading, `refine_after`) measured against the exhaustive one they replaced
 //! (`Search::Exhaustive`) on recorded episodes: heuristic-1 run to the action limit on the

@@ -1,9 +1,9 @@
-//! What the episode's last refinement buys with each budget (issue 22; docs/EVALUATION.md,
+//! What the episode's last refinement buys with each budget (docs/EVALUATION.md,
 //! "The refinement's budget").
 //!
 //! Runs each baseline agent to its oracle stop on the first N test plans and, at the end of
 //! every episode, refines the final readings under several [`Budget`]s: the exhaustive
-//! search the refinement was before issue 22, the screened one that runs after every
+//! search the refinement once was, the screened one that runs after every
 //! reading, and variants that spend more on the leave-outs and the heading sweep. For each
 //! it prints the mean pose error of recognised episodes (the main job's column), its p95,
 //! how many exceed 0.3 m, and the hypotheses registered per refinement (what a budget
@@ -27,7 +27,7 @@ use rayon::prelude::*;
 fn budgets(heading_known: bool) -> Vec<(&'static str, Budget)> {
     let s = Budget::SCREENED;
     let mut v = vec![
-        ("exhaustive (before issue 22)", Budget::EXHAUSTIVE),
+        ("exhaustive", Budget::EXHAUSTIVE),
         ("screened (every reading)", s),
         (
             "end of episode (pipeline)",

@@ -1,6 +1,6 @@
 //! Which of the seeds of one training configuration is committed, and how far apart the
-//! seeds are (issue 21: at least three seeds behind every reported configuration, the
-//! committed one picked on validation plans, never on the test plans).
+//! seeds are (at least three seeds stand behind every reported configuration, the committed
+//! one picked on validation plans, never on the test plans).
 //!
 //! `cargo run --release -p activesense-lab --example select_seed -- K DIR [VALIDATION_PLANS] [pick]`
 //! evaluates the learnt agent of every `DIR/seeds/S/policy.policy` (oracle stop, the paper's

@@ -1,4 +1,4 @@
-//! How the calibrated stop's threshold should grow with the readings (issue 21): the
+//! How the calibrated stop's threshold should grow with the readings: the
 //! measurement behind [`activesense_core::stop::stop_score`]'s exponent.
 //!
 //! Reads the decision points `activesense calibrate --samples-out FILE` wrote (default

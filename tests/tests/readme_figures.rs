@@ -1,5 +1,5 @@
 //! The README's and the guide's tables against the files they come from: a figure cannot drift
-//! from its committed result without this test failing (issue 23). The README keeps the headline
+//! from its committed result without this test failing. The README keeps the headline
 //! tables (the no-oracle table and Table 4), checked there and in `docs/results.md`; every other
 //! table lives in `docs/results.md` and is checked there: the "ours" rows of Table 4 against
 //! `results/results.json`, the greedy, greedy-confident and ablation tables against their runs, the
@@ -183,7 +183,7 @@ fn the_calibrated_stop_table_is_results_confident() {
     );
 }
 
-/// The no-oracle table (issue 21), in the README and in the guide's results page: every agent,
+/// The no-oracle table, in the README and in the guide's results page: every agent,
 /// K = 1 and 10, stopping by itself, from the main job's `results/no-oracle/results.json`.
 #[test]
 fn the_no_oracle_table_is_the_main_jobs() {

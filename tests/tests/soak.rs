@@ -1,4 +1,4 @@
-//! Reliability under load (issue 22): many consecutive episodes in **one** QEMU session of
+//! Reliability under load: many consecutive episodes in **one** QEMU session of
 //! the real firmware, cycling through both K (1, 10), both agents (heuristic-1, the int8
 //! learnt policy) and both stops (oracle, confident), each checked bit-identical to the
 //! host's in-process run and the host's own agent (`check_episodes_with`); the link's

@@ -1,6 +1,6 @@
 //! `activesense mcu-bench`: the firmware's instructions per on-device event under QEMU
 //! (`-icount shift=0`, the firmware's `bench` mode), K = 1 and K = 10, as the markdown tables
-//! of `results/mcu-bench/` with the stack's high-water mark and whether issue 22's targets
+//! of `results/mcu-bench/` with the stack's high-water mark and whether the device's targets
 //! are met (README, "Instructions per update"). Split from [`super::remote`], whose episode
 //! runner it drives.
 
@@ -240,7 +240,7 @@ pub fn mcu_bench_targets(rows: &[McuBenchRow]) -> String {
         }
     }
     let target = format!(
-        "every event mean ≤ {:.0} M and worst ≤ {:.0} M instructions (issue 22)",
+        "every event mean ≤ {:.0} M and worst ≤ {:.0} M instructions (the device's budget)",
         EVENT_TARGET_MEAN / 1e6,
         EVENT_TARGET_MAX as f64 / 1e6
     );

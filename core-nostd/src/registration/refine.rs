@@ -279,7 +279,7 @@ pub fn rival_fit(
 /// as the answer's (`pipeline::REGISTRATION_STARTS`). With three, a rival's fit missed its
 /// basin often enough that the rival margin over-stated the answer: on the learnt policy's
 /// K = 10 calibration episodes (4000 plans) the stop needed 9.18 ranges for 1 % wrong first
-/// stops, with nine 8.89 (`docs/analysis/stop_features.py --quarters`), and on 1000 validation plans
+/// stops, with nine 8.89 (`lab/scripts/stop_features.py --quarters`), and on 1000 validation plans
 /// it cost 0.594 instead of 0.632 at a stated 1 % (`docs/EVALUATION.md`, "A rival fitted
 /// from every heading start"). Each rival's cost is its annealing, not its sweep: the
 /// device's K = 10 update went from 10.8 M to 11.3 M instructions on average with the

@@ -1,4 +1,4 @@
-//! What the instrument answers, as a surveyor reads it (issue 20): the station's position in
+//! What the instrument answers, as a surveyor reads it: the station's position in
 //! the plan's own coordinates (the file's units and axes, f64), its heading with the
 //! convention stated (degrees and gon), the precision of the fit (standard deviations from
 //! the registration's information matrix, or "underdetermined"), the readings it rests on,

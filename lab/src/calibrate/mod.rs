@@ -78,7 +78,7 @@ pub struct Sample {
     /// The answer (the refined pose) is outside the tolerance of the truth.
     pub wrong: bool,
     /// How far the answer lies from the truth (m; at the nearest symmetric equivalent), for
-    /// the analyses in `docs/analysis/`.
+    /// the analyses in `lab/scripts/`.
     #[serde(default)]
     pub position_error: f32,
     /// The answer's heading error (degrees, at the same equivalent).

@@ -1,4 +1,4 @@
-//! The risk–cost frontier of the calibrated stop (issue 21): the same evaluation run at
+//! The risk–cost frontier of the calibrated stop: the same evaluation run at
 //! several `--stop-risk` settings, and per agent and rotation setting what each setting
 //! costs against the wrong-answer rate it is observed to give. A surveyor picks their risk
 //! from it; the *stated* column (the setting, and the mean estimate the stop claimed when it

@@ -46,8 +46,8 @@ mod loss;
 mod network;
 mod sample;
 
-pub use adam::{clip_global_norm, Adam};
 use activesense_core::policy::int8;
+pub use adam::{clip_global_norm, Adam};
 pub use kernels::guided_relu_mask;
 pub use layout::{Layer, LayerKind, NetShape};
 pub use loss::{entropy, entropy_grad, log_prob_grad, log_softmax, softmax};

@@ -1,4 +1,4 @@
-//! Can the instrument localize in this room? Checked when a plan file is loaded (issue 20),
+//! Can the instrument localize in this room? Checked when a plan file is loaded,
 //! so that a hall the EDM cannot span, a sliver the instrument cannot stand in, or a room
 //! the 30 × 30 localizer grid cannot resolve is refused (or warned about) with the reason
 //! and what to do, instead of failing later with errors of tens of metres and "risk not

@@ -10,13 +10,13 @@ odd half checks. An episode that never stops counts the action limit (100) as it
 
     activesense calibrate --agents learnt --rot-bins 10 --plans 4000 --agent-tables none \
         --samples-out S --rust-out /tmp/cal.rs --out /tmp/cal
-    python3 docs/analysis/stop_features.py S            # logistic against boosted trees
-    python3 docs/analysis/stop_features.py S --history  # with the answer's history features
-    python3 docs/analysis/stop_features.py S --quarters # the logistic model over four splits, with and
+    python3 lab/scripts/stop_features.py S            # logistic against boosted trees
+    python3 lab/scripts/stop_features.py S --history  # with the answer's history features
+    python3 lab/scripts/stop_features.py S --quarters # the logistic model over four splits, with and
                                                         # without the previous decision point's margin
 
-`--history` needs samples written by a build with `docs/analysis/answer-history.patch` or
-`docs/analysis/argmax-history.patch` applied (each adds `settled_readings` and `answer_step` to the
+`--history` needs samples written by a build with `lab/scripts/answer-history.patch` or
+`lab/scripts/argmax-history.patch` applied (each adds `settled_readings` and `answer_step` to the
 features: of the answer, or of the belief argmax). Needs numpy and scikit-learn.
 """
 
@@ -123,7 +123,7 @@ def xy(episodes, plans, vec):
 
 def with_previous(f, prev):
     """`features` and the previous decision point's rival margin (in the margin's two pieces) and a
-    flag where there is none (docs/analysis/previous-margin.patch)."""
+    flag where there is none (lab/scripts/previous-margin.patch)."""
     if prev is None:
         return features(f) + [0.0, 0.0, 1.0]
     m = margin(prev)

@@ -12,7 +12,7 @@ were found (README, "Instructions per update"): a trace, not a sample, so the sa
 every run.
 
 Usage (the sim's own options after `--`):
-    python3 docs/analysis/qemu_profile.py [--top 40] [--callers 12] -- \
+    python3 lab/scripts/qemu_profile.py [--top 40] [--callers 12] -- \
         --first-seed 1000000 --episodes 3 --agent learnt --rot-bins 10 --termination confident
 
 Slow (QEMU writes one line per executed block): about 30 s per K = 10 episode.

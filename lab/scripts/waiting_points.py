@@ -16,12 +16,12 @@ another pose (a twin).
 
     activesense calibrate --agents learnt --rot-bins 10 --plans 4000 --agent-tables none \
         --samples-out S --rust-out /tmp/cal.rs --out /tmp/cal
-    python3 docs/analysis/waiting_points.py S [--risk 0.01]
+    python3 lab/scripts/waiting_points.py S [--risk 0.01]
     # the same samples under an earlier model (features it did not read count with weight 0):
     git show ef694db:core-nostd/src/stop/calibration.rs > /tmp/old.rs
-    python3 docs/analysis/waiting_points.py S --calibration /tmp/old.rs
+    python3 lab/scripts/waiting_points.py S --calibration /tmp/old.rs
 
-Needs numpy. Uses the feature vector of docs/analysis/stop_features.py.
+Needs numpy. Uses the feature vector of lab/scripts/stop_features.py.
 """
 
 import argparse

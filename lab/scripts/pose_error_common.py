@@ -8,7 +8,7 @@ the episodes only the first recognises. On the common plans it also prints each 
 share of episodes beyond 5, 10 and 30 cm, and how much of the mean the episodes beyond 10 cm carry (the
 registration-error reward is clipped there: it says nothing about errors beyond 10 cm).
 
-    python3 docs/analysis/pose_error_common.py results/results.json \\
+    python3 lab/scripts/pose_error_common.py results/results.json \\
         results/ablations/k10-ppo-no-registration-reward/results.json 10
 """
 

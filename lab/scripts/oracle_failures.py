@@ -8,7 +8,7 @@ setting K by whether the refined pose was nonetheless within `TOL` metres of the
 (the argmax one cell off while the registration is right: a cell-edge case), and prints them with
 their readings, final pose error and the peak mass of the belief.
 
-    python3 docs/analysis/oracle_failures.py results/results.json learnt 1 [TOL=0.02]
+    python3 lab/scripts/oracle_failures.py results/results.json learnt 1 [TOL=0.02]
 """
 
 import json

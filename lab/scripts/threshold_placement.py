@@ -13,7 +13,7 @@ fit of the rate, weighted by the stops, is at most P). Then the threshold placed
 
     activesense calibrate --agents learnt --rot-bins 10 --plans 4000 --agent-tables none \\
         --samples-out S --rust-out /tmp/cal.rs --out /tmp/cal
-    python3 docs/analysis/threshold_placement.py S
+    python3 lab/scripts/threshold_placement.py S
 
 Needs numpy.
 """
