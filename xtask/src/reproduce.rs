@@ -166,6 +166,7 @@ pub const STEPS: &[Step] = &[
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-confident.md"), ..cli("mcu-bench-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--termination", "confident"], 160) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-confident.md"), ..cli("mcu-bench-int8-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8", "--termination", "confident"], 40) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/size.md"), ..cli("size", "results", &["size"], 120) },
+    Step { runner: Runner::Example("redraw"), ..cli("charts", "results", &["results", "policies"], 5) },
 ];
 
 /// The root of the workspace.
@@ -432,6 +433,7 @@ pub const CHECKS: &[Check] = &[
     Check { name: "int8-blobs", what: "policies/k*/policy.q8 equal `policy quantize` of the committed float policies" },
     Check { name: "eval-prefixes", what: "the first plans' episodes of every committed results/**/results.json come out of today's code" },
     Check { name: "size", what: "results/size.md equals `cargo xtask size`" },
+    Check { name: "charts", what: "every committed chart (results/**/*.svg, policies/**/curve.svg) is what today's code draws from its JSON" },
     Check {
         name: "curves",
         what: "the first CHECK_UPDATES updates of every committed learning curve (log.csv, all columns but wall time and steps/s) replay",
@@ -492,6 +494,7 @@ fn check(o: &Options) -> Result<()> {
             "int8-blobs" => &|s: &Step| s.name.starts_with("int8-"),
             "eval-prefixes" => &|s: &Step| s.args.first() == Some(&"eval"),
             "curves" => &|s: &Step| s.args.first() == Some(&"train"),
+            "charts" => &|s: &Step| s.name == "charts",
             _ => &|s: &Step| s.name == "size",
         };
         if !check_chosen(c, o, steps_of) {
@@ -503,6 +506,7 @@ fn check(o: &Options) -> Result<()> {
             "eval-prefixes" => check_eval_prefixes(&ctx)?,
             "size" => check_size(&ctx)?,
             "curves" => check_curves(&ctx)?,
+            "charts" => check_charts(&ctx)?,
             _ => unreachable!("every check has a body"),
         };
         stale.extend(found);
@@ -720,6 +724,32 @@ pub fn first_curve_difference(committed: &str, fresh: &str) -> Option<String> {
         }
     }
     (rows == 0).then(|| "the replay logged no row".to_string())
+}
+
+/// The charts, drawn again from their committed JSON by the `redraw` example, against the
+/// committed SVGs.
+fn check_charts(ctx: &Ctx) -> Result<Vec<String>> {
+    let mut c = super::cargo();
+    c.args([
+        "run",
+        "--quiet",
+        "--release",
+        "-p",
+        "activesense-lab",
+        "--example",
+        "redraw",
+        "--",
+        "--check",
+    ]);
+    c.arg(ctx.committed.join("results"));
+    c.arg(ctx.committed.join("policies"));
+    c.current_dir(root());
+    let status = c.status().context("running the redraw example")?;
+    Ok(if status.success() {
+        vec![]
+    } else {
+        vec!["the charts listed above (step charts)".into()]
+    })
 }
 
 fn check_size(ctx: &Ctx) -> Result<Vec<String>> {

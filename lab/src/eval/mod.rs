@@ -30,14 +30,15 @@
 //! the per-group aggregation), [`harness`] (options, the parallel run, the report),
 //! [`paper`] (the paper's Table 4, quoted), [`report`] (results.md and the output files),
 //! [`experiments`] (the extra-measurements analysis), [`frontier`] (the stop's risk–cost
-//! frontier over several `--stop-risk` settings). The charts are drawn by
-//! [`crate::plot`] from plain numbers.
+//! frontier over several `--stop-risk` settings), [`redraw`] (every committed chart drawn
+//! again from its JSON). The charts are drawn by [`crate::plot`] from plain numbers.
 
 pub mod experiments;
 pub mod frontier;
 pub mod harness;
 pub mod paper;
 pub mod record;
+pub mod redraw;
 pub mod report;
 pub mod stats;
 

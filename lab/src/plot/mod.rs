@@ -1,13 +1,16 @@
-//! Every picture the crate draws, as hand-written SVG (a few line charts and a floor-plan
-//! do not justify a plotting dependency), from plain numbers: this module never imports the
-//! evaluation or the trainer, they pass their data in.
+//! Every chart of the lab, drawn with `plotters`' SVG backend from plain numbers: this module
+//! never imports the evaluation or the trainer, they pass their data in. Ticks fall on 1-2-5
+//! values, each panel's legend sits inside it, and every axis says its unit.
 //!
-//! Here: the budget chart (recognition rate and pose error against the measurement budget,
-//! one line per agent, one row of two panels per rotation setting, [`budget_svg`]) and the
-//! generic multi-panel line chart [`line_panels`] with its shared legend. [`charts`] holds
-//! the evaluation's other charts (utility curves, reliability diagram, extra
-//! measurements) and [`curve`] the trainer's learning curve. The plan and episode scene is
-//! the instrument's (`activesense_instrument::plot::svg`).
+//! Here: the generic multi-panel line chart [`line_panels`] and the budget chart
+//! (recognition rate and pose error against the measurement budget, one line per agent,
+//! [`budget_svg`]). [`charts`] holds the evaluation's other charts (utility curves,
+//! reliability diagram, extra measurements) and [`curve`] the trainer's learning curve. The
+//! plan and episode scene is the instrument's (`activesense_instrument::plot::svg`), drawn
+//! by hand: a floor plan is polygons, not axes.
+//!
+//! Why `plotters` without a font backend: its naive text metrics need no font files, so
+//! the committed SVGs are the same bytes on every machine (the browser draws the text).
 
 pub mod charts;
 pub mod curve;
@@ -16,86 +19,27 @@ pub use charts::{
     extra_svg, reliability_svg, utility_svg, ExtraLine, ReliabilityLine, UtilityLine,
 };
 
-use std::fmt::Write;
+use plotters::prelude::*;
 
-const COLOURS: [&str; 12] = [
-    "#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d", "#666666",
-    "#1f78b4", "#b15928", "#6a3d9a", "#000000",
+const COLOURS: [RGBColor; 12] = [
+    RGBColor(0x1b, 0x9e, 0x77),
+    RGBColor(0xd9, 0x5f, 0x02),
+    RGBColor(0x75, 0x70, 0xb3),
+    RGBColor(0xe7, 0x29, 0x8a),
+    RGBColor(0x66, 0xa6, 0x1e),
+    RGBColor(0xe6, 0xab, 0x02),
+    RGBColor(0xa6, 0x76, 0x1d),
+    RGBColor(0x66, 0x66, 0x66),
+    RGBColor(0x1f, 0x78, 0xb4),
+    RGBColor(0xb1, 0x59, 0x28),
+    RGBColor(0x6a, 0x3d, 0x9a),
+    RGBColor(0x00, 0x00, 0x00),
 ];
-const PANEL_W: f64 = 420.0;
-const PANEL_H: f64 = 260.0;
-const LEFT: f64 = 70.0;
-const TOP: f64 = 60.0;
-const GAP_X: f64 = 110.0;
-const GAP_Y: f64 = 90.0;
-
-struct Panel {
-    x0: f64,
-    y0: f64,
-    ymax: f64,
-    max_budget: usize,
-}
-
-impl Panel {
-    fn px(&self, budget: f64, y: f64) -> (f64, f64) {
-        let x = self.x0 + (budget - 1.0) / (self.max_budget as f64 - 1.0) * PANEL_W;
-        let y = self.y0 + PANEL_H - (y / self.ymax).clamp(0.0, 1.0) * PANEL_H;
-        (x, y)
-    }
-}
-
-fn axes(
-    s: &mut String,
-    p: &Panel,
-    title: &str,
-    ylabel: &str,
-    yticks: &[f64],
-    fmt: &dyn Fn(f64) -> String,
-) {
-    let _ = writeln!(
-        s,
-        r##"<rect x="{:.1}" y="{:.1}" width="{PANEL_W}" height="{PANEL_H}" fill="none" stroke="#444"/>"##,
-        p.x0, p.y0
-    );
-    let _ = writeln!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" font-weight="bold" text-anchor="middle">{title}</text>"#,
-        p.x0 + PANEL_W / 2.0,
-        p.y0 - 10.0
-    );
-    for &t in yticks {
-        let (_, y) = p.px(1.0, t);
-        let _ = writeln!(
-            s,
-            r##"<line x1="{:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end" font-size="11">{}</text>"##,
-            p.x0,
-            p.x0 + PANEL_W,
-            p.x0 - 6.0,
-            y + 4.0,
-            fmt(t)
-        );
-    }
-    for b in (0..=p.max_budget).step_by(5).skip(1).chain([1]) {
-        let (x, y) = p.px(b as f64, 0.0);
-        let _ = writeln!(
-            s,
-            r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle" font-size="11">{b}</text>"#,
-            y + 16.0
-        );
-    }
-    let _ = writeln!(
-        s,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="12">measurement budget</text>"#,
-        p.x0 + PANEL_W / 2.0,
-        p.y0 + PANEL_H + 34.0
-    );
-    let _ = writeln!(
-        s,
-        r#"<text transform="translate({:.1},{:.1}) rotate(-90)" text-anchor="middle" font-size="12">{ylabel}</text>"#,
-        p.x0 - 48.0,
-        p.y0 + PANEL_H / 2.0
-    );
-}
+/// One panel's size in pixels.
+const PANEL_W: u32 = 520;
+const PANEL_H: u32 = 340;
+/// Room for the chart's title.
+const TITLE_H: u32 = 40;
 
 /// One agent and rotation setting of the budget chart: recognition rate and mean pose error
 /// of the recognised episodes within budgets `1..=max_budget` measurements.
@@ -111,7 +55,8 @@ pub struct BudgetLine<'a> {
 }
 
 /// Renders the budget plot over `plans` plans for every rotation setting in `settings`,
-/// budgets `1..=max_budget`, agents in legend order `agents`.
+/// budgets `1..=max_budget`, agents in legend order `agents`: per setting, the recognition
+/// rate and the mean pose error of the recognised against the budget.
 pub fn budget_svg(
     plans: u32,
     max_budget: usize,
@@ -119,15 +64,8 @@ pub fn budget_svg(
     agents: &[String],
     lines: &[BudgetLine<'_>],
 ) -> String {
-    let width = LEFT + 2.0 * PANEL_W + GAP_X + 170.0;
-    let height = TOP + settings.len() as f64 * (PANEL_H + GAP_Y) + 20.0;
-    let mut s = svg_head(
-        width,
-        height,
-        &format!("Recognition and pose error within a measurement budget ({plans} plans)"),
-    );
     // Shared pose-error scale: the 90th percentile of the plotted means, rounded up to a
-    // nice value, so one agent with a huge error does not flatten the others (lines above
+    // 1-2-5 value, so one agent with a huge error does not flatten the others (lines above
     // the scale are clipped at the top edge).
     let mut all: Vec<f64> = lines
         .iter()
@@ -139,80 +77,53 @@ pub fn budget_svg(
         .into_iter()
         .find(|v| *v >= emax)
         .unwrap_or(10.0);
-    for (row, &k) in settings.iter().enumerate() {
-        let y0 = TOP + 20.0 + row as f64 * (PANEL_H + GAP_Y);
-        let rec = Panel {
-            x0: LEFT,
-            y0,
-            ymax: 1.0,
-            max_budget,
-        };
-        let err = Panel {
-            x0: LEFT + PANEL_W + GAP_X,
-            y0,
-            ymax: emax,
-            max_budget,
-        };
+    let budgets = |values: &mut dyn Iterator<Item = Option<f64>>| -> Vec<(f64, Option<f64>)> {
+        values
+            .enumerate()
+            .map(|(i, v)| (i as f64 + 1.0, v))
+            .collect()
+    };
+    let mut panels = Vec::new();
+    for &k in settings {
         let tag = if k == 1 {
             "1 rotation bin".to_string()
         } else {
             format!("{k} rotation bins")
         };
-        axes(
-            &mut s,
-            &rec,
-            &format!("recognition rate — {tag}"),
-            "recognised within budget",
-            &[0.0, 0.25, 0.5, 0.75, 1.0],
-            &|v| format!("{v:.2}"),
-        );
-        axes(
-            &mut s,
-            &err,
-            &format!("pose error — {tag}"),
-            "mean pose error of recognised (m)",
-            &[0.0, emax / 4.0, emax / 2.0, 3.0 * emax / 4.0, emax],
-            &|v| format!("{v:.3}"),
-        );
-        for (ai, name) in agents.iter().enumerate() {
-            let Some(r) = lines.iter().find(|r| r.agent == name && r.rot_bins == k) else {
-                continue;
-            };
-            let c = COLOURS[ai % COLOURS.len()];
-            let pts: Vec<String> = r
-                .recognition
+        let of = |f: &dyn Fn(&BudgetLine<'_>) -> Vec<(f64, Option<f64>)>| -> Vec<Series> {
+            agents
                 .iter()
-                .enumerate()
-                .map(|(i, v)| {
-                    let (x, y) = rec.px(i as f64 + 1.0, *v);
-                    format!("{x:.1},{y:.1}")
+                .filter_map(|name| {
+                    let r = lines.iter().find(|r| r.agent == name && r.rot_bins == k)?;
+                    Some(Series {
+                        name: name.clone(),
+                        points: f(r),
+                    })
                 })
-                .collect();
-            let _ = writeln!(
-                s,
-                r#"<polyline points="{}" fill="none" stroke="{c}" stroke-width="2"/>"#,
-                pts.join(" ")
-            );
-            // Pose-error line: only where some episode was recognised within the budget.
-            let mut seg: Vec<String> = Vec::new();
-            for (i, v) in r.pose_error.iter().enumerate() {
-                if let Some(v) = v {
-                    let (x, y) = err.px(i as f64 + 1.0, *v);
-                    seg.push(format!("{x:.1},{y:.1}"));
-                }
-            }
-            if !seg.is_empty() {
-                let _ = writeln!(
-                    s,
-                    r#"<polyline points="{}" fill="none" stroke="{c}" stroke-width="2"/>"#,
-                    seg.join(" ")
-                );
-            }
-        }
+                .collect()
+        };
+        panels.push(LinePanel {
+            title: format!("recognition rate — {tag}"),
+            xlabel: "measurement budget (ranges)".into(),
+            ylabel: "recognised within budget (fraction)".into(),
+            x: (1.0, max_budget as f64),
+            y: (0.0, 1.0),
+            series: of(&|r| budgets(&mut r.recognition.iter().map(|v| Some(*v)))),
+        });
+        panels.push(LinePanel {
+            title: format!("pose error — {tag}"),
+            xlabel: "measurement budget (ranges)".into(),
+            ylabel: "mean pose error of recognised (m)".into(),
+            x: (1.0, max_budget as f64),
+            y: (0.0, emax),
+            series: of(&|r| budgets(&mut r.pose_error.iter().copied())),
+        });
     }
-    legend(&mut s, LEFT + 2.0 * PANEL_W + GAP_X + 20.0, agents);
-    s.push_str("</svg>\n");
-    s
+    line_panels(
+        &format!("Recognition and pose error within a measurement budget ({plans} plans)"),
+        &panels,
+        2,
+    )
 }
 
 /// One line of a [`line_panels`] chart: a name and its points (`None` leaves a gap).
@@ -239,11 +150,12 @@ pub struct LinePanel {
     pub series: Vec<Series>,
 }
 
-/// Renders panels side by side (`columns` per row) with one shared legend: the utility-vs-
-/// cost curves and the extra-measurement plot.
+/// Renders panels side by side (`columns` per row), each with its legend inside: the
+/// utility-vs-cost curves, the frontier, the learning curve and the extra-measurement plot.
+/// A name has the same colour in every panel.
 pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String {
     let columns = columns.max(1);
-    let rows = panels.len().div_ceil(columns);
+    let rows = panels.len().div_ceil(columns).max(1);
     let mut names: Vec<&str> = Vec::new();
     for p in panels {
         for sr in &p.series {
@@ -252,153 +164,156 @@ pub fn line_panels(title: &str, panels: &[LinePanel], columns: usize) -> String 
             }
         }
     }
-    // Room on the right for the legend's longest label.
-    let longest = names.iter().map(|n| n.chars().count()).max().unwrap_or(0) as f64;
-    let width = (LEFT + columns as f64 * (PANEL_W + GAP_X) - GAP_X + 60.0 + 7.5 * longest)
-        .max(LEFT + columns as f64 * (PANEL_W + GAP_X) + 80.0);
-    let height =
-        (TOP + rows as f64 * (PANEL_H + GAP_Y) + 20.0).max(TOP + 40.0 + 20.0 * names.len() as f64);
-    let mut s = svg_head(width, height, title);
-    for (i, p) in panels.iter().enumerate() {
-        let x0 = LEFT + (i % columns) as f64 * (PANEL_W + GAP_X);
-        let y0 = TOP + 20.0 + (i / columns) as f64 * (PANEL_H + GAP_Y);
-        let (xa, xb) = (p.x.0, if p.x.1 > p.x.0 { p.x.1 } else { p.x.0 + 1.0 });
-        let (ya, yb) = (p.y.0, if p.y.1 > p.y.0 { p.y.1 } else { p.y.0 + 1.0 });
-        let px = |x: f64, y: f64| {
-            (
-                x0 + (x - xa) / (xb - xa) * PANEL_W,
-                y0 + PANEL_H - ((y - ya) / (yb - ya)).clamp(0.0, 1.0) * PANEL_H,
-            )
-        };
-        let _ = writeln!(
-            s,
-            r##"<rect x="{x0:.1}" y="{y0:.1}" width="{PANEL_W}" height="{PANEL_H}" fill="none" stroke="#444"/>"##
-        );
-        let _ = writeln!(
-            s,
-            r#"<text x="{:.1}" y="{:.1}" font-weight="bold" text-anchor="middle">{}</text>"#,
-            x0 + PANEL_W / 2.0,
-            y0 - 10.0,
-            xml(&p.title)
-        );
-        for k in 0..=4 {
-            let yv = ya + (yb - ya) * k as f64 / 4.0;
-            let (_, y) = px(xa, yv);
-            let _ = writeln!(
-                s,
-                r##"<line x1="{x0:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end" font-size="11">{}</text>"##,
-                x0 + PANEL_W,
-                x0 - 6.0,
-                y + 4.0,
-                tick(yv)
-            );
-            let xv = xa + (xb - xa) * k as f64 / 4.0;
-            let (x, y) = px(xv, ya);
-            let _ = writeln!(
-                s,
-                r#"<text x="{x:.1}" y="{:.1}" text-anchor="middle" font-size="11">{}</text>"#,
-                y + 16.0,
-                tick(xv)
-            );
-        }
-        let _ = writeln!(
-            s,
-            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle" font-size="12">{}</text>"#,
-            x0 + PANEL_W / 2.0,
-            y0 + PANEL_H + 34.0,
-            xml(&p.xlabel)
-        );
-        let _ = writeln!(
-            s,
-            r#"<text transform="translate({:.1},{:.1}) rotate(-90)" text-anchor="middle" font-size="12">{}</text>"#,
-            x0 - 48.0,
-            y0 + PANEL_H / 2.0,
-            xml(&p.ylabel)
-        );
-        for sr in &p.series {
-            let ci = names.iter().position(|n| *n == sr.name).unwrap_or(0);
-            let c = COLOURS[ci % COLOURS.len()];
-            // One polyline per gap-free run.
-            let mut run: Vec<String> = Vec::new();
-            let flush = |run: &mut Vec<String>, s: &mut String| {
-                if run.len() > 1 {
-                    let _ = writeln!(
-                        s,
-                        r#"<polyline points="{}" fill="none" stroke="{c}" stroke-width="2"/>"#,
-                        run.join(" ")
-                    );
-                } else if let Some(pt) = run.first() {
-                    let mut xy = pt.split(',');
-                    let (x, y) = (xy.next().unwrap_or("0"), xy.next().unwrap_or("0"));
-                    let _ = writeln!(s, r#"<circle cx="{x}" cy="{y}" r="2.5" fill="{c}"/>"#);
-                }
-                run.clear();
-            };
-            for &(x, y) in &sr.points {
-                match y {
-                    Some(y) if y.is_finite() => {
-                        let (x, y) = px(x, y);
-                        run.push(format!("{x:.1},{y:.1}"));
-                    }
-                    _ => flush(&mut run, &mut s),
-                }
-            }
-            flush(&mut run, &mut s);
-        }
-    }
-    legend(
-        &mut s,
-        LEFT + columns as f64 * (PANEL_W + GAP_X) - GAP_X + 20.0,
-        &names,
-    );
-    let _ = writeln!(s, "</svg>");
-    s
-}
-
-/// The opening of a chart: the `<svg>` element of `width` × `height`, a white background
-/// and the bold title line.
-fn svg_head(width: f64, height: f64, title: &str) -> String {
+    let size = (PANEL_W * columns as u32, TITLE_H + PANEL_H * rows as u32);
     let mut s = String::new();
-    let _ = writeln!(
-        s,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="sans-serif" font-size="13">"#
-    );
-    let _ = writeln!(s, r##"<rect width="100%" height="100%" fill="#fff"/>"##);
-    let _ = writeln!(
-        s,
-        r#"<text x="{LEFT}" y="24" font-size="16" font-weight="bold">{}</text>"#,
-        xml(title)
-    );
+    let drawn = draw_panels(&mut s, size, title, panels, columns, rows, &names);
+    if let Err(e) = drawn {
+        // Drawing into a string does not fail on its own; say so in the picture if it does.
+        s = format!(
+            r#"<svg xmlns="http://www.w3.org/2000/svg" width="{}" height="{}"><text x="10" y="20">{}: {}</text></svg>"#,
+            size.0,
+            size.1,
+            xml(title),
+            xml(&e.to_string())
+        );
+    }
+    if !s.ends_with('\n') {
+        s.push('\n');
+    }
     s
 }
 
-/// The shared legend at `lx`: one coloured line and name per series, in colour order.
-fn legend<S: AsRef<str>>(s: &mut String, lx: f64, names: &[S]) {
-    for (i, name) in names.iter().enumerate() {
-        let y = TOP + 30.0 + i as f64 * 20.0;
-        let c = COLOURS[i % COLOURS.len()];
-        let _ = writeln!(
-            s,
-            r#"<line x1="{lx:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{c}" stroke-width="3"/><text x="{:.1}" y="{:.1}">{}</text>"#,
-            lx + 24.0,
-            lx + 30.0,
-            y + 4.0,
-            xml(name.as_ref())
-        );
+type DrawResult = Result<(), Box<dyn std::error::Error>>;
+
+fn draw_panels(
+    s: &mut String,
+    size: (u32, u32),
+    title: &str,
+    panels: &[LinePanel],
+    columns: usize,
+    rows: usize,
+    names: &[&str],
+) -> DrawResult {
+    let root = SVGBackend::with_string(s, size).into_drawing_area();
+    root.fill(&WHITE)?;
+    let root = root.titled(title, ("sans-serif", 17).into_font().style(FontStyle::Bold))?;
+    for (p, area) in panels.iter().zip(root.split_evenly((rows, columns))) {
+        draw_panel(&area, p, names)?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+fn draw_panel(
+    area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    p: &LinePanel,
+    names: &[&str],
+) -> DrawResult {
+    let (xa, xb) = (p.x.0, if p.x.1 > p.x.0 { p.x.1 } else { p.x.0 + 1.0 });
+    let (ya, yb) = (p.y.0, if p.y.1 > p.y.0 { p.y.1 } else { p.y.0 + 1.0 });
+    let mut chart = ChartBuilder::on(area)
+        .caption(&p.title, ("sans-serif", 14))
+        .margin(12)
+        .x_label_area_size(44)
+        .y_label_area_size(64)
+        .build_cartesian_2d(xa..xb, ya..yb)?;
+    chart
+        .configure_mesh()
+        .x_desc(&p.xlabel)
+        .y_desc(&p.ylabel)
+        .x_labels(6)
+        .y_labels(6)
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .light_line_style(WHITE)
+        .bold_line_style(BLACK.mix(0.12))
+        .label_style(("sans-serif", 11))
+        .axis_desc_style(("sans-serif", 12))
+        .draw()?;
+    let clip = |y: f64| y.clamp(ya, yb);
+    for sr in &p.series {
+        let ci = names.iter().position(|n| *n == sr.name).unwrap_or(0);
+        let c = COLOURS[ci % COLOURS.len()];
+        // One line per gap-free run; a lone point is a dot. The legend entry comes once.
+        let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+        for &(x, y) in &sr.points {
+            match y {
+                Some(y) if y.is_finite() && x.is_finite() => {
+                    runs.last_mut().expect("one run").push((x, clip(y)))
+                }
+                _ => runs.push(Vec::new()),
+            }
+        }
+        let mut labelled = false;
+        for run in runs.into_iter().filter(|r| !r.is_empty()) {
+            let style = c.stroke_width(2);
+            let drawn = if run.len() > 1 {
+                chart.draw_series(LineSeries::new(run, style))?
+            } else {
+                chart.draw_series(run.into_iter().map(|pt| Circle::new(pt, 3, c.filled())))?
+            };
+            if !labelled {
+                drawn.label(sr.name.as_str()).legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(3))
+                });
+                labelled = true;
+            }
+        }
+    }
+    if !p.series.is_empty() {
+        chart
+            .configure_series_labels()
+            .position(legend_corner(p, ya, yb))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.3))
+            .label_font(("sans-serif", 11))
+            .draw()?;
+    }
+    Ok(())
+}
+
+/// The corner of the panel the lines leave freest at its right edge: the legend goes low
+/// when the lines end high, high otherwise.
+fn legend_corner(p: &LinePanel, ya: f64, yb: f64) -> SeriesLabelPosition {
+    // Markers (two-point lines such as the end of the warm start) do not count.
+    let lines: Vec<&Series> = p.series.iter().filter(|sr| sr.points.len() > 2).collect();
+    let lines = if lines.is_empty() {
+        p.series.iter().collect()
+    } else {
+        lines
+    };
+    let ends: Vec<f64> = lines
+        .into_iter()
+        .filter_map(|sr| {
+            sr.points
+                .iter()
+                .rev()
+                .find_map(|&(_, y)| y.filter(|y| y.is_finite()))
+        })
+        .map(|y| (y - ya) / (yb - ya))
+        .collect();
+    let mean = ends.iter().sum::<f64>() / ends.len().max(1) as f64;
+    if mean > 0.5 {
+        SeriesLabelPosition::LowerRight
+    } else {
+        SeriesLabelPosition::UpperRight
     }
 }
 
+/// A tick label: as few digits as the 1-2-5 value needs; thousands and millions as k and M.
 fn tick(v: f64) -> String {
-    if v == 0.0 {
+    if v.abs() >= 1e6 {
+        return format!("{}M", tick(v / 1e6));
+    }
+    if v.abs() >= 1e4 {
+        return format!("{}k", tick(v / 1e3));
+    }
+    let t = format!("{v:.6}");
+    let t = t.trim_end_matches('0').trim_end_matches('.');
+    if t == "-0" {
         "0".into()
-    } else if v.abs() >= 10.0 {
-        format!("{v:.0}")
-    } else if v.abs() >= 1.0 {
-        format!("{v:.1}")
-    } else if v.abs() >= 0.1 {
-        format!("{v:.2}")
     } else {
-        format!("{v:.3}")
+        t.into()
     }
 }
 
