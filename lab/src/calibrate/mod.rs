@@ -513,7 +513,7 @@ pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
         .iter()
         .any(|k| matches!(k, AgentKind::Learnt | AgentKind::LearntInt8))
     {
-        Policies::load(&[], &rot_bins)?
+        Policies::load(&[], rot_bins)?
     } else {
         Policies::default()
     };
@@ -541,7 +541,7 @@ pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
             "K = {k}: running {} episodes",
             agents.len() as u32 * a.plans
         );
-        let episodes = collect(&opts, k, &agents, 0..a.plans, opts.progress);
+        let episodes = collect(&opts, k, agents, 0..a.plans, opts.progress);
         if let Some(path) = &a.samples_out {
             use std::io::Write;
             let mut f = std::io::BufWriter::new(
@@ -626,8 +626,8 @@ pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
         });
     }
     std::fs::create_dir_all(&a.out)?;
-    std::fs::write(&a.rust_out, rust_source(&fitted, &command))?;
-    std::fs::write(a.out.join("calibration.md"), markdown(&fitted, &command))?;
+    std::fs::write(&a.rust_out, rust_source(&fitted, command))?;
+    std::fs::write(a.out.join("calibration.md"), markdown(&fitted, command))?;
     std::fs::write(
         a.out.join("calibration.json"),
         serde_json::to_string_pretty(&fitted)?,

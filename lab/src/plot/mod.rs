@@ -54,6 +54,9 @@ pub struct BudgetLine<'a> {
     pub pose_error: &'a [Option<f64>],
 }
 
+/// A line's points: `(x, y)`, `None` for a gap.
+type Points = Vec<(f64, Option<f64>)>;
+
 /// Renders the budget plot over `plans` plans for every rotation setting in `settings`,
 /// budgets `1..=max_budget`, agents in legend order `agents`: per setting, the recognition
 /// rate and the mean pose error of the recognised against the budget.
@@ -77,7 +80,7 @@ pub fn budget_svg(
         .into_iter()
         .find(|v| *v >= emax)
         .unwrap_or(10.0);
-    let budgets = |values: &mut dyn Iterator<Item = Option<f64>>| -> Vec<(f64, Option<f64>)> {
+    let budgets = |values: &mut dyn Iterator<Item = Option<f64>>| -> Points {
         values
             .enumerate()
             .map(|(i, v)| (i as f64 + 1.0, v))
@@ -90,7 +93,7 @@ pub fn budget_svg(
         } else {
             format!("{k} rotation bins")
         };
-        let of = |f: &dyn Fn(&BudgetLine<'_>) -> Vec<(f64, Option<f64>)>| -> Vec<Series> {
+        let of = |f: &dyn Fn(&BudgetLine<'_>) -> Points| -> Vec<Series> {
             agents
                 .iter()
                 .filter_map(|name| {
