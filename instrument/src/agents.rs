@@ -7,10 +7,10 @@
 
 use crate::baselines::greedy;
 use crate::episode;
-use crate::learn::agent::{default_policy_path, Int8Policy, LearntPolicy};
+use crate::learn::agent::{default_policy_path_for, Int8Policy, LearntPolicy};
 use crate::learn::file;
 use crate::world::SimWorld;
-use activesense_core::episode::{Action, AgentKind};
+use activesense_core::episode::{Action, AgentKind, InstrumentProfile};
 use activesense_core::policy::{BaselineAgent, Policy, PolicyInput};
 use std::path::PathBuf;
 
@@ -25,6 +25,18 @@ impl Policies {
     /// given file covers), or, when nothing is given, the committed
     /// [`default_policy_path`]s. Every error names the file and what is wrong.
     pub fn load(given: &[PathBuf], rot_bins: &[u8]) -> anyhow::Result<Self> {
+        Self::load_for(InstrumentProfile::EdmScan, given, rot_bins)
+    }
+
+    /// [`Self::load`] for `instrument`: the defaults are its committed policies
+    /// ([`default_policy_path_for`]), and a policy trained for another instrument is
+    /// refused (a scan network on an instrument without a camera would read empty scans it
+    /// never saw; an EDM-only network on the paper's sensor would ignore what it is shown).
+    pub fn load_for(
+        instrument: InstrumentProfile,
+        given: &[PathBuf],
+        rot_bins: &[u8],
+    ) -> anyhow::Result<Self> {
         let mut by_k: Vec<(u8, PathBuf)> = Vec::new();
         for path in given {
             let (net, _) = file::load(path)?;
@@ -42,7 +54,7 @@ impl Policies {
         for &k in rot_bins {
             let path = match by_k.iter().find(|(kk, _)| *kk == k) {
                 Some((_, p)) => p.clone(),
-                None if given.is_empty() => default_policy_path(k),
+                None if given.is_empty() => default_policy_path_for(instrument, k),
                 None => {
                     let have: Vec<String> = by_k.iter().map(|(kk, _)| kk.to_string()).collect();
                     anyhow::bail!(
@@ -51,9 +63,26 @@ impl Policies {
                     );
                 }
             };
-            out.push(LearntPolicy::load(&path, k).map_err(|e| {
+            let p = LearntPolicy::load(&path, k).map_err(|e| {
                 anyhow::anyhow!("{e} (the learnt agent with --rot-bins {k} needs a policy for K = {k}; train one with `activesense train --rot-bins {k}` or pass --policy FILE)")
-            })?);
+            })?;
+            if p.mask.instrument() != Some(instrument) {
+                anyhow::bail!(
+                    "'{}' was trained with inputs '{}', a policy for {}, not for --instrument {}: {}",
+                    path.display(),
+                    p.mask.name(),
+                    p.mask
+                        .instrument()
+                        .map_or("no instrument (an ablation)".to_string(), |i| format!("--instrument {}", i.name())),
+                    instrument.name(),
+                    if instrument.has_scan() {
+                        "give a policy trained on the scan (--inputs full)"
+                    } else {
+                        "an instrument without a camera needs a policy trained without scans (--inputs no-scans)"
+                    }
+                );
+            }
+            out.push(p);
         }
         Ok(Policies(out, Vec::new()))
     }
@@ -62,6 +91,17 @@ impl Policies {
     /// K its header names; every setting must be covered when any is given), or the blobs
     /// built into the firmware ([`activesense_core::policy::builtin`]).
     pub fn load_int8(&mut self, given: &[PathBuf], rot_bins: &[u8]) -> anyhow::Result<()> {
+        self.load_int8_for(InstrumentProfile::EdmScan, given, rot_bins)
+    }
+
+    /// [`Self::load_int8`] for `instrument`: the defaults are the blobs built into the
+    /// firmware for it, and a blob made for another instrument is refused.
+    pub fn load_int8_for(
+        &mut self,
+        instrument: InstrumentProfile,
+        given: &[PathBuf],
+        rot_bins: &[u8],
+    ) -> anyhow::Result<()> {
         let mut blobs = Vec::new();
         for path in given {
             let p = Int8Policy::load(path)?;
@@ -71,15 +111,21 @@ impl Policies {
             blobs.push(p);
         }
         if given.is_empty() {
-            for (k, bytes) in [
-                (1u8, activesense_core::policy::builtin::K1),
-                (10, activesense_core::policy::builtin::K10),
-            ] {
+            for (k, bytes) in activesense_core::policy::builtin::blobs_for(instrument) {
+                let dir = if instrument.has_scan() { "" } else { "edm/" };
                 blobs.push(Int8Policy::new(
                     bytes.to_vec(),
-                    format!("built-in k{k}/policy.q8"),
+                    format!("built-in {dir}k{k}/policy.q8"),
                 )?);
             }
+        }
+        if let Some(b) = blobs.iter().find(|b| b.instrument != instrument) {
+            anyhow::bail!(
+                "{} is an int8 policy for --instrument {}, not for --instrument {}",
+                b.origin,
+                b.instrument.name(),
+                instrument.name()
+            );
         }
         for &k in rot_bins {
             let Some(p) = blobs.iter().find(|b| b.rot_bins == k) else {
@@ -262,5 +308,78 @@ mod tests {
             .to_string();
         assert!(e.contains("bad.policy"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// The committed policies of each instrument load for it and are refused for the other,
+    /// float and int8 alike, with a message that says which instrument they are for.
+    #[test]
+    fn a_policy_for_another_instrument_is_refused() {
+        for (own, other) in [
+            (InstrumentProfile::EdmScan, InstrumentProfile::Edm),
+            (InstrumentProfile::Edm, InstrumentProfile::EdmScan),
+        ] {
+            assert!(Policies::load_for(own, &[], &[1, 10]).is_ok());
+            let mut p = Policies::default();
+            assert!(p.load_int8_for(own, &[], &[1, 10]).is_ok());
+            let path = default_policy_path_for(own, 10);
+            let e = Policies::load_for(other, &[path], &[10])
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(&format!("not for --instrument {}", other.name())),
+                "{e}"
+            );
+            let blob = path_of_blob(own, 10);
+            let e = Policies::default()
+                .load_int8_for(other, &[blob], &[10])
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(&format!("not for --instrument {}", other.name())),
+                "{e}"
+            );
+        }
+    }
+
+    fn path_of_blob(instrument: InstrumentProfile, k: u8) -> PathBuf {
+        default_policy_path_for(instrument, k).with_file_name("policy.q8")
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(6))]
+        /// Never stall: in the learnt agents' episodes, on either instrument and with room
+        /// for long episodes (300 actions), no run of rotations without a measurement is
+        /// longer than a whole turn (`EpisodeRunner::stall_limit`).
+        #[test]
+        fn learnt_agents_never_turn_a_whole_turn_without_measuring(
+            plan in crate::world::plans::TEST_SEEDS,
+            episode_seed in 0u64..1000,
+        ) {
+            for instrument in InstrumentProfile::ALL {
+                let mut policies = Policies::load_for(instrument, &[], &[1, 10]).unwrap();
+                policies.load_int8_for(instrument, &[], &[1, 10]).unwrap();
+                for agent in [AgentKind::Learnt, AgentKind::LearntInt8] {
+                    for k in [1u8, 10] {
+                        let mut spec = episode::EpisodeSpec::new(plan, agent);
+                        spec.episode_seed = episode_seed;
+                        spec.rot_bins = k;
+                        spec.config.max_actions = 300;
+                        spec.config.instrument = instrument;
+                        spec.termination = episode::Termination::Confident;
+                        let t = run_agent_episode(&spec, &policies).unwrap();
+                        let mut run = 0u16;
+                        for s in &t.steps {
+                            run = if s.action == Action::Measure { 0 } else { run + 1 };
+                            proptest::prop_assert!(
+                                run <= spec.config.steps_per_turn,
+                                "{} K = {k} {}: {run} rotations in a row",
+                                agent.name(),
+                                instrument.name()
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 }

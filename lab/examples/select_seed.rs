@@ -56,17 +56,24 @@ fn evaluate(
     plans: u32,
     termination: Termination,
 ) -> Figures {
+    // The instrument the seed was trained for (a scan-blind network is the EDM-only one's):
+    // its sensor and its stop's tables.
+    let (_, meta) = activesense_instrument::learn::file::load(policy).expect("seed policy");
+    let instrument = activesense_instrument::learn::agent::InputMask::of_metadata(&meta)
+        .instrument()
+        .expect("an instrument's policy");
     let opts = EvalOptions {
         agents: vec![AgentKind::Learnt],
         rot_bins: vec![k],
         plans,
         first_seed,
         episode_seed: 0,
-        config: EpisodeConfig::default(),
+        config: EpisodeConfig::default().on(instrument),
         sensor: SensorModel::default(),
         termination,
         policy_files: vec![policy.display().to_string()],
-        policies: Policies::load(&[policy.to_path_buf()], &[k]).expect("seed policy"),
+        policies: Policies::load_for(instrument, &[policy.to_path_buf()], &[k])
+            .expect("seed policy"),
         progress: false,
         curve_plans: 0,
         tolerance: Default::default(),

@@ -54,11 +54,19 @@ pub fn confident_stop(stop_risk: f32, min_observability: f32) -> impl Fn(&mut Ep
     }
 }
 
+/// An `adjust` for [`check_episodes_with`]: the EDM-only instrument (no scan; its own int8
+/// policies and stop tables, which the host names in `EpisodeParams`, protocol v9) with the
+/// calibrated stop at the default risk.
+pub fn edm_only(s: &mut EpisodeSpec) {
+    s.config.instrument = activesense_core::episode::InstrumentProfile::Edm;
+    s.termination = Termination::Confident;
+}
+
 /// The host's own episode for `s` (baseline, or the int8 policy built into the firmware).
 pub fn host_episode(s: &EpisodeSpec) -> Trajectory {
     let mut policies = Policies::default();
     policies
-        .load_int8(&[], &[s.rot_bins])
+        .load_int8_for(s.config.instrument, &[], &[s.rot_bins])
         .expect("built-in int8 policies");
     run_agent_episode(s, &policies).expect("host episode")
 }
@@ -93,7 +101,7 @@ pub fn check_episodes_with<T: Read + Write>(
         // The host's own run: the baseline, or the int8 policy built into the firmware.
         let mut policies = Policies::default();
         policies
-            .load_int8(&[], &[rot_bins])
+            .load_int8_for(s.config.instrument, &[], &[rot_bins])
             .expect("built-in int8 policies");
         let traj = run_agent_episode(&s, &policies).expect("host episode");
         let lead: Vec<(Action, Option<u32>, u32)> = traj
@@ -434,7 +442,13 @@ fn learnt_episode_matches<T: Read + Write>(client: &mut Client<T>, seed_index: u
 /// A K = 1 int8 blob different from the built-in one: a random network, quantised.
 pub fn other_k1_blob() -> Vec<u8> {
     let net = activesense_lab::learn::quantize::random_net(1, 77);
-    activesense_lab::learn::quantize::quantize_calibrated(&net, 3, 5).0
+    activesense_lab::learn::quantize::quantize_calibrated(
+        &net,
+        activesense_core::episode::InstrumentProfile::EdmScan,
+        3,
+        5,
+    )
+    .0
 }
 
 /// The policy upload: a good blob replaces the built-in K = 1 policy and serves (episodes

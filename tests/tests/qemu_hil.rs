@@ -24,6 +24,10 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
     // The confident stop with the host's stop rule (protocol v4): stop_risk 0.05 and an
     // observability threshold, the same actions and stop step on the firmware as on the host.
     assert!(check_episodes_with(&mut l.client, 2, 10, confident_stop(0.05, 0.2)) > 0);
+    // The EDM-only instrument: its own built-in blobs and stop tables on the device, the
+    // same actions and stop as on the host.
+    assert!(check_episodes_with(&mut l.client, 4, 1, activesense_tests::edm_only) > 0);
+    assert!(check_episodes_with(&mut l.client, 4, 10, activesense_tests::edm_only) > 0);
     fault_suite(&mut l.client);
     check_episodes(&mut l.client, 1, 10);
     // A policy uploaded into the firmware's RAM slot serves bit-identically; bad uploads

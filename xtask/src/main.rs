@@ -7,7 +7,7 @@
 //! cargo xtask setup        # only the installs: thumbv7em-none-eabihf target, qemu-system-arm, chromium
 //! cargo xtask firmware     # build the firmware ELF (profile `firmware`)
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
-//! cargo xtask mcu-bench [--episodes N] [--agent NAME] [--termination T]  # instructions per update / decision / registration (QEMU -icount)
+//! cargo xtask mcu-bench [--episodes N] [--agent NAME] [--termination T] [--instrument P]  # instructions per update / decision / registration (QEMU -icount)
 //! cargo xtask qemu-log     # the firmware's defmt log (smoke boot + one session), decoded
 //! cargo xtask soak [--episodes N]  # N episodes in one QEMU session, each bit-identical to the host
 //! cargo xtask reproduce [--list] [--only A,B] [--skip A,B] [--resume] [--check]  # every committed artifact
@@ -255,9 +255,16 @@ fn mcu_bench(args: &[String]) -> Result<()> {
     let mut episodes = 20u32;
     let mut agent = "heuristic-1".to_string();
     let mut termination = "oracle".to_string();
+    let mut instrument = "edm+scan".to_string();
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
+            "--instrument" => {
+                instrument = it
+                    .next()
+                    .context("--instrument needs edm or edm+scan")?
+                    .clone()
+            }
             "--episodes" => {
                 episodes = it
                     .next()
@@ -292,6 +299,8 @@ fn mcu_bench(args: &[String]) -> Result<()> {
             &agent,
             "--termination",
             &termination,
+            "--instrument",
+            &instrument,
             "--elf",
         ])
         .arg(&elf))

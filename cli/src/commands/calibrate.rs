@@ -2,7 +2,7 @@
 //! fit itself is `activesense_lab::calibrate`.
 
 use super::options::{parse_agent, EpisodeOptions};
-use activesense_core::episode::Termination;
+use activesense_core::episode::{InstrumentProfile, Termination};
 use activesense_core::stop::AGENT_TABLES;
 use activesense_instrument::world::plans;
 use activesense_lab::calibrate::{calibrate, CalibrateOptions};
@@ -50,12 +50,14 @@ pub struct CalibrateArgs {
     /// Ridge (L2) penalty on the weights.
     #[arg(long, default_value_t = 1e-3)]
     pub ridge: f64,
-    /// Where to write the fitted models as Rust source (the file the core compiles).
-    #[arg(long, default_value = "core-nostd/src/stop/calibration.rs")]
-    pub rust_out: PathBuf,
-    /// Directory of the report (calibration.md, calibration.json).
-    #[arg(long, default_value = "results/calibration")]
-    pub out: PathBuf,
+    /// Where to write the fitted models as Rust source (the file the core compiles; default:
+    /// core-nostd/src/stop/calibration.rs, for --instrument edm calibration_edm.rs).
+    #[arg(long)]
+    pub rust_out: Option<PathBuf>,
+    /// Directory of the report (calibration.md, calibration.json; default:
+    /// results/calibration, for --instrument edm results/calibration/edm).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -110,6 +112,7 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
             a.plans
         );
     }
+    let instrument = a.episode.instrument.instrument;
     let command = std::iter::once("activesense".to_string())
         .chain(std::env::args().skip(1))
         .collect::<Vec<_>>()
@@ -125,8 +128,14 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
         config: a.episode.config(),
         agent_table_plans: a.agent_table_plans,
         ridge: a.ridge,
-        rust_out: a.rust_out,
-        out: a.out,
+        rust_out: a.rust_out.unwrap_or_else(|| match instrument {
+            InstrumentProfile::EdmScan => "core-nostd/src/stop/calibration.rs".into(),
+            InstrumentProfile::Edm => "core-nostd/src/stop/calibration_edm.rs".into(),
+        }),
+        out: a.out.unwrap_or_else(|| match instrument {
+            InstrumentProfile::EdmScan => "results/calibration".into(),
+            InstrumentProfile::Edm => "results/calibration/edm".into(),
+        }),
         threads: a.threads,
         samples_out: a.samples_out,
         progress: !a.no_progress,

@@ -99,8 +99,16 @@ fn spec_of(a: &EpisodeArgs) -> Result<EpisodeSpec> {
 fn play(a: &EpisodeArgs, spec: &EpisodeSpec) -> Result<(Policies, Trajectory)> {
     let mut policies = Policies::default();
     match spec.agent {
-        AgentKind::Learnt => policies = Policies::load(a.policy.as_slice(), &[spec.rot_bins])?,
-        AgentKind::LearntInt8 => policies.load_int8(a.int8.as_slice(), &[spec.rot_bins])?,
+        AgentKind::Learnt => {
+            policies = Policies::load_for(
+                spec.config.instrument,
+                a.policy.as_slice(),
+                &[spec.rot_bins],
+            )?
+        }
+        AgentKind::LearntInt8 => {
+            policies.load_int8_for(spec.config.instrument, a.int8.as_slice(), &[spec.rot_bins])?
+        }
         _ => {}
     }
     // The learnt float policy's episodes carry the inspection data (`activesense inspect`).
@@ -219,12 +227,15 @@ fn print_outcome(t: &Trajectory) {
     }
     match o.stop_risk {
         Some(r) => println!(
-            "estimated risk of a wrong registration: {:.2} % (for a stated risk of {:.2} % the confident stop stops where the estimate × 8 / readings is below {:.2} %)",
+            "the stop model's raw estimate: {:.2} % (for a stated risk of {:.2} % the confident stop stops where the estimate × 8 / readings is below {:.2} %)",
             100.0 * r,
             100.0 * t.spec.config.stop_risk,
             100.0
-                * activesense_core::stop::StopModel::for_rot_bins(t.spec.rot_bins)
-                    .threshold_for(t.spec.agent, t.spec.config.stop_risk)
+                * activesense_core::stop::StopModel::built_in(
+                    t.spec.config.instrument,
+                    t.spec.rot_bins
+                )
+                .threshold_for(t.spec.agent, t.spec.config.stop_risk)
         ),
         None => println!(
             "estimated risk of a wrong registration: not available (belief peak mass below {}, fewer readings than unknowns, or no registration)",

@@ -4,7 +4,7 @@
 
 use super::command_line;
 use super::options::{parse_agent, parse_stop_risk, parse_tolerance, EpisodeOptions, SensorArgs};
-use activesense_core::episode::AgentKind;
+use activesense_core::episode::{AgentKind, InstrumentProfile};
 use activesense_instrument::agents::Policies;
 use activesense_instrument::world::planfile::{self, PlanReadArgs};
 use activesense_instrument::world::plans;
@@ -72,7 +72,8 @@ pub struct EvalArgs {
     tolerance: activesense_core::registration::pose_distance::Tolerance,
     /// Also evaluate the same agents stopping by themselves (`--termination confident`)
     /// and write that run into OUT/no-oracle/: the table an instrument without an oracle
-    /// lives by (README, "Without an oracle").
+    /// lives by (README, "Without an oracle"); for the paper's sensor also the EDM-only
+    /// instrument's (its policies and stop tables) into OUT/no-oracle-edm/.
     #[arg(long)]
     with_no_oracle: bool,
     /// With --termination confident: run the evaluation once per stop risk (comma-separated,
@@ -137,12 +138,13 @@ pub fn run(a: EvalArgs) -> Result<()> {
     };
     let mut opts = opts;
     if opts.agents.contains(&AgentKind::Learnt) {
-        opts.policies = Policies::load(&a.policy, &opts.rot_bins)?;
+        opts.policies = Policies::load_for(opts.config.instrument, &a.policy, &opts.rot_bins)?;
     } else if !a.policy.is_empty() {
         bail!("--policy given but the learnt agent is not among --agents");
     }
     if opts.agents.contains(&AgentKind::LearntInt8) {
-        opts.policies.load_int8(&a.int8, &opts.rot_bins)?;
+        opts.policies
+            .load_int8_for(opts.config.instrument, &a.int8, &opts.rot_bins)?;
     } else if !a.int8.is_empty() {
         bail!("--int8 given but the learnt-int8 agent is not among --agents");
     }
@@ -218,6 +220,34 @@ pub fn run(a: EvalArgs) -> Result<()> {
         let (report, timing) = harness::run(&no_oracle);
         let files = report::write_outputs(&report, &timing, &dir, &command)?;
         print_summary(&report, &timing, &files);
+        // The instrument surveyors own has no camera: the same table for it, with its own
+        // policies and stop tables.
+        if no_oracle.config.instrument == InstrumentProfile::EdmScan {
+            let mut edm = no_oracle;
+            edm.config.instrument = InstrumentProfile::Edm;
+            edm.policies = Policies::default();
+            if edm.agents.contains(&AgentKind::Learnt) {
+                edm.policies = Policies::load_for(InstrumentProfile::Edm, &[], &edm.rot_bins)?;
+            }
+            if edm.agents.contains(&AgentKind::LearntInt8) {
+                edm.policies
+                    .load_int8_for(InstrumentProfile::Edm, &[], &edm.rot_bins)?;
+            }
+            edm.policy_files = edm
+                .policies
+                .iter()
+                .map(|p| p.describe())
+                .chain(edm.policies.int8().map(|p| p.describe()))
+                .collect();
+            let dir = a.out.join("no-oracle-edm");
+            eprintln!(
+                "the EDM-only instrument (no scan), without an oracle: the same {} episodes",
+                edm.agents.len() * edm.rot_bins.len() * edm.plans as usize
+            );
+            let (report, timing) = harness::run(&edm);
+            let files = report::write_outputs(&report, &timing, &dir, &command)?;
+            print_summary(&report, &timing, &files);
+        }
     }
     Ok(())
 }

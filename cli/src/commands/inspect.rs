@@ -60,6 +60,9 @@ pub fn cmd_inspect(a: InspectArgs, command: &str) -> Result<()> {
         );
     }
     let rot_bins = a.episode.one_rot_bins(1)?;
+    if a.episode.instrument.instrument != activesense_core::episode::InstrumentProfile::EdmScan {
+        bail!("the Fig.-4 aggregate is the paper's analysis: --instrument edm+scan");
+    }
     a.episode.refuse(
         "inspect --aggregate",
         &[

@@ -260,9 +260,13 @@ pub fn cmd_mcu_bench(a: McuBenchArgs) -> Result<()> {
     let rows = mcu_bench(&a)?;
     println!(
         "firmware {} under qemu-system-arm -M netduinoplus2 -icount shift=0 (1 TIM2 tick = 1 \
-         guest instruction), agent {:?}, termination {:?}, plan seeds {}..{}, episode seed {}\n",
+         guest instruction), agent {:?}{}, termination {:?}, plan seeds {}..{}, episode seed {}\n",
         a.elf.display(),
         a.agent,
+        match a.options.instrument.instrument {
+            activesense_core::episode::InstrumentProfile::EdmScan => String::new(),
+            other => format!(" (instrument {})", other.name()),
+        },
         a.options.termination,
         a.first_seed,
         a.first_seed.wrapping_add(a.episodes),

@@ -7,7 +7,8 @@
 //! [`EpisodeConfig`] is built from the command line.
 
 use activesense_core::episode::{
-    AgentKind, EpisodeConfig, Termination, DEFAULT_STEPS_PER_TURN, EVAL_MAX_ACTIONS,
+    AgentKind, EpisodeConfig, InstrumentProfile, Termination, DEFAULT_STEPS_PER_TURN,
+    EVAL_MAX_ACTIONS,
 };
 use activesense_core::limits::DEFAULT_STOP_RISK;
 use activesense_core::registration::pose_distance::Tolerance;
@@ -60,11 +61,25 @@ impl RotBinsOption {
     }
 }
 
+/// The instrument the episodes are played on: part of [`EpisodeOptions`], and alone where a
+/// command picks the committed policies of an instrument without playing its own episodes.
+#[derive(Args, Clone, Debug)]
+pub struct InstrumentOption {
+    /// The instrument: `edm` (motor and reflectorless EDM only, what GeoCOM total stations
+    /// are) or `edm+scan` (the paper's sensor, with the topological camera scan). It picks
+    /// the simulated sensor, the committed policies (float and int8) and the stop's tables
+    /// that belong to it; a policy made for the other is refused.
+    #[arg(long = "instrument", value_name = "PROFILE", default_value = "edm+scan", value_parser = parse_instrument)]
+    pub instrument: InstrumentProfile,
+}
+
 /// How the episodes of a command are played.
 #[derive(Args, Clone, Debug)]
 pub struct EpisodeOptions {
     #[command(flatten)]
     pub rot_bins: RotBinsOption,
+    #[command(flatten)]
+    pub instrument: InstrumentOption,
     /// Episode seed (placement, noise and agent randomness; placement and noise also depend
     /// on the plan).
     #[arg(long, default_value_t = 0)]
@@ -142,6 +157,7 @@ impl EpisodeOptions {
             max_actions: self.max_actions,
             min_observability: self.min_observability,
             stop_risk: self.stop_risk,
+            instrument: self.instrument.instrument,
             ..Default::default()
         }
     }
@@ -291,6 +307,12 @@ pub fn parse_stop_risk(s: &str) -> Result<f32, String> {
             "'{s}' is not a stop risk (a probability P with 0 < P <= 1: the largest accepted chance that the registration is wrong, e.g. 0.01 for 1 %)"
         )),
     }
+}
+
+/// Command-line parser for `--instrument`.
+pub fn parse_instrument(s: &str) -> Result<InstrumentProfile, String> {
+    InstrumentProfile::from_name(s)
+        .ok_or_else(|| format!("unknown instrument '{s}' (expected edm or edm+scan)"))
 }
 
 /// Command-line parser for `--agent`.

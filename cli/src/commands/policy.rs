@@ -2,7 +2,7 @@
 //! float-vs-int8 agreement on the test plans (`agreement`), and, over a link to an
 //! instrument, uploading an int8 policy (`upload`) and asking which one serves (`info`).
 
-use super::options::RotBinsOption;
+use super::options::{InstrumentOption, RotBinsOption};
 use super::write_file;
 use activesense_instrument::agents::Policies;
 use activesense_instrument::link::runner::open_link;
@@ -32,6 +32,9 @@ pub struct AgreementArgs {
     // --rot-bins (default here: 1,10); the episodes are the evaluation's defaults.
     #[command(flatten)]
     rot_bins: RotBinsOption,
+    // --instrument: whose committed policies and episodes.
+    #[command(flatten)]
+    instrument: InstrumentOption,
     /// Test plans per setting (seeds from 1000000 on).
     #[arg(long, default_value_t = 200)]
     plans: usize,
@@ -58,23 +61,26 @@ pub fn quantize(a: QuantizeArgs) -> Result<()> {
     use activesense_lab::learn::quantize;
     let (net, meta) = file::load(&a.policy).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mask = activesense_instrument::learn::agent::InputMask::of_metadata(&meta);
-    if mask != activesense_instrument::learn::agent::InputMask::Full {
+    // A network trained without scans is the EDM-only instrument's: it has no camera, so
+    // the int8 network reads the same zeros the float one was trained on.
+    let Some(instrument) = mask.instrument() else {
         bail!(
-            "{} is an ablation trained on '{}' inputs; the instrument's int8 policy shows the network every input, so only full-input policies can be quantised",
+            "{} is an ablation trained on '{}' inputs, no instrument's policy: only policies trained on every input (the paper's sensor) or without scans (the EDM-only instrument) can be quantised",
             a.policy.display(),
             mask.name()
         );
-    }
-    let (blob, r) = quantize::quantize_calibrated(&net, a.calibration_episodes, a.seed);
+    };
+    let (blob, r) = quantize::quantize_calibrated(&net, instrument, a.calibration_episodes, a.seed);
     std::fs::write(&a.out, &blob).with_context(|| format!("cannot write {}", a.out.display()))?;
     println!(
-        "calibrated on {} states of {} training episodes (seed {}); wrote {} ({} bytes, K = {})",
+        "calibrated on {} states of {} training episodes (seed {}); wrote {} ({} bytes, K = {}, --instrument {})",
         r.states,
         a.calibration_episodes,
         a.seed,
         a.out.display(),
         blob.len(),
-        net.shape.rot_bins
+        net.shape.rot_bins,
+        instrument.name()
     );
     Ok(())
 }
@@ -92,7 +98,8 @@ fn read_blob(path: &Path) -> Result<(u8, Vec<u8>)> {
 pub fn agreement(a: AgreementArgs) -> Result<()> {
     use activesense_lab::learn::quantize;
     let rot_bins = a.rot_bins.list(&[1, 10])?;
-    let policies = Policies::load(&a.policy, &rot_bins)?;
+    let instrument = a.instrument.instrument;
+    let policies = Policies::load_for(instrument, &a.policy, &rot_bins)?;
     let mut blobs = Vec::new();
     for path in &a.int8 {
         blobs.push((read_blob(path)?, path.clone()));
@@ -106,7 +113,9 @@ pub fn agreement(a: AgreementArgs) -> Result<()> {
             .ok_or_else(|| anyhow::anyhow!("no float policy for K = {k}"))?;
         let blob = match blobs.iter().find(|((bk, _), _)| *bk == k) {
             Some(((_, b), _)) => b.clone(),
-            None => quantize::quantize_calibrated(&p.net, a.calibration_episodes, a.seed).0,
+            None => {
+                quantize::quantize_calibrated(&p.net, instrument, a.calibration_episodes, a.seed).0
+            }
         };
         let r = quantize::agreement(&p.net, &blob, a.plans).map_err(|e| {
             anyhow::anyhow!("int8 blob for K = {k} does not fit {}: {e}", p.describe())

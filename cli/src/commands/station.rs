@@ -81,6 +81,7 @@ impl GeoComLink {
 /// `activesense station`.
 #[derive(Args, Debug)]
 #[command(mut_arg("termination", |a| a.default_value("confident")))]
+#[command(mut_arg("instrument", |a| a.default_value("edm")))]
 pub struct StationArgs {
     // clap's help text: the brackets are an optional part, not a rustdoc link.
     #[allow(rustdoc::broken_intra_doc_links)]
@@ -244,6 +245,7 @@ impl StationReport {
         client: &mut Client,
         frame: &PlanFrame,
         tie_break: Option<u8>,
+        risk: Option<f64>,
         max_risk: f32,
     ) -> Result<[f64; 4]> {
         let cands = self.candidates();
@@ -259,10 +261,14 @@ impl StationReport {
                 self.symmetry_order
             ),
         };
-        if !self.stopped && self.risk.is_none_or(|r| r > max_risk) {
+        if !self.stopped && risk.is_none_or(|r| r > f64::from(max_risk)) {
             bail!(
-                "the answer is not confident (risk {:?} above {max_risk}): nothing written",
-                self.risk
+                "the answer is not confident enough to write: {}, above the {} you accept (--stop-risk); nothing written",
+                match risk {
+                    Some(r) => format!("the risk that it is wrong is {:.1} %", 100.0 * r),
+                    None => "the stop has no estimate of the risk that it is wrong".to_string(),
+                },
+                format_args!("{:.1} %", 100.0 * max_risk)
             );
         }
         let [x, y, t] = cands[k];
@@ -311,6 +317,7 @@ impl StationReport {
             heading_known: false,
             symmetry_order: o.result.symmetry_order,
             stop_risk: o.result.stop_risk,
+            stop_tables: Some((setup.agent, setup.config.instrument, ROT_BINS)),
             truth: None,
             hint,
             range_sigma: setup.sensor.sigma,
@@ -348,8 +355,12 @@ pub fn setup_of(a: &StationArgs) -> Result<(String, SessionSetup, Policies)> {
     let config = a.episode.config();
     let mut policies = Policies::default();
     match a.agent {
-        AgentKind::Learnt => policies = Policies::load(a.policy.as_slice(), &[ROT_BINS])?,
-        AgentKind::LearntInt8 => policies.load_int8(a.int8.as_slice(), &[ROT_BINS])?,
+        AgentKind::Learnt => {
+            policies = Policies::load_for(config.instrument, a.policy.as_slice(), &[ROT_BINS])?
+        }
+        AgentKind::LearntInt8 => {
+            policies.load_int8_for(config.instrument, a.int8.as_slice(), &[ROT_BINS])?
+        }
         _ => {}
     }
     let setup = SessionSetup {
@@ -420,7 +431,13 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
     println!("{}", answer.to_text());
     report.print();
     let written = if a.set_station {
-        Some(report.write_to_instrument(inst.client(), &frame, a.tie_break, a.episode.stop_risk))
+        Some(report.write_to_instrument(
+            inst.client(),
+            &frame,
+            a.tie_break,
+            answer.risk,
+            a.episode.stop_risk,
+        ))
     } else {
         None
     };
@@ -463,6 +480,7 @@ pub fn run(a: StationArgs) -> Result<()> {
 
 /// `activesense geocom-sim`.
 #[derive(Args)]
+#[command(mut_arg("instrument", |a| a.default_value("edm")))]
 pub struct GeocomSimArgs {
     /// The room to play (JSON, GeoJSON or DXF).
     #[arg(long)]

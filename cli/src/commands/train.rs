@@ -3,7 +3,7 @@
 
 use super::command_line;
 use super::options::{EpisodeOption, EpisodeOptions};
-use activesense_core::episode::Termination;
+use activesense_core::episode::{InstrumentProfile, Termination};
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -58,6 +58,12 @@ pub fn run(a: TrainArgs) -> Result<()> {
         ],
         "a training run draws its episodes from --seed and plays them on the evaluation's encoder grid with the default stop",
     )?;
+    // An EDM-only instrument has no camera: its policy never sees a scan.
+    if a.episode.instrument.instrument == InstrumentProfile::Edm
+        && a.hp.inputs != activesense_instrument::learn::agent::InputMask::NoScans
+    {
+        bail!("--instrument edm has no camera: train its policy with --inputs no-scans");
+    }
     super::set_threads(a.threads)?;
     let mut hp = a.hp;
     hp.rot_bins = a.episode.one_rot_bins(1)?;

@@ -4,7 +4,9 @@
 //! reports the episode ([`EpisodeReport`]). It knows nothing of frames or request ids
 //! ([`crate::device::session`] does).
 
-use crate::episode::{Action, AgentKind, EpisodeParams, Observation, ParamError};
+use crate::episode::{
+    Action, AgentKind, EpisodeParams, InstrumentProfile, Observation, ParamError,
+};
 use crate::pipeline::runner::{Booked, EpisodeRunner};
 use crate::pipeline::PipelineError;
 use crate::policy::int8::{QuantizedPolicy, Scratch as QScratch, ScratchAgent};
@@ -70,6 +72,8 @@ pub struct Controller {
     slot: [u8; POLICY_SLOT_BYTES],
     slot_len: usize,
     slot_rot_bins: u8,
+    /// The instrument the uploaded blob is for.
+    slot_instrument: InstrumentProfile,
     upload: Option<Upload>,
     /// Activations of the int8 policy.
     scratch: QScratch,
@@ -93,28 +97,36 @@ impl Controller {
             slot: [0; POLICY_SLOT_BYTES],
             slot_len: 0,
             slot_rot_bins: 0,
+            slot_instrument: InstrumentProfile::EdmScan,
             upload: None,
             scratch: QScratch::new(),
         }
     }
 
-    /// The policy serving `rot_bins`: the uploaded one if it is for this K, else the first
-    /// sound built-in one (`None` index = the upload slot).
-    fn policy_for(&self, rot_bins: u8) -> Option<(Option<usize>, &[u8])> {
-        if self.slot_len > 0 && self.slot_rot_bins == rot_bins {
+    /// The policy serving `rot_bins` on `instrument`: the uploaded one if it is for this K
+    /// and instrument, else the first sound built-in one (`None` index = the upload slot). A
+    /// blob for another instrument never serves.
+    fn policy_for(
+        &self,
+        instrument: InstrumentProfile,
+        rot_bins: u8,
+    ) -> Option<(Option<usize>, &[u8])> {
+        if self.slot_len > 0 && self.slot_rot_bins == rot_bins && self.slot_instrument == instrument
+        {
             return Some((None, &self.slot[..self.slot_len]));
         }
         self.builtin.iter().enumerate().find_map(|(i, b)| {
             QuantizedPolicy::parse(b)
                 .ok()
-                .filter(|p| p.rot_bins() == rot_bins)
+                .filter(|p| p.rot_bins() == rot_bins && p.instrument() == instrument)
                 .map(|_| (Some(i), *b))
         })
     }
 
-    /// Which policy serves `rot_bins`.
+    /// Which policy serves `rot_bins` on the paper's sensor (the protocol's `PolicyInfo`
+    /// names K only).
     pub fn policy_info(&self, rot_bins: u8) -> PolicyInfo {
-        match self.policy_for(rot_bins) {
+        match self.policy_for(InstrumentProfile::EdmScan, rot_bins) {
             Some((src, bytes)) => PolicyInfo {
                 rot_bins,
                 source: if src.is_none() {
@@ -207,15 +219,16 @@ impl Controller {
         if crate::protocol::crc32(body) != up.crc {
             return Err(WireError::Policy(PolicyError::Checksum));
         }
-        let found = QuantizedPolicy::parse(blob)
-            .map_err(|e| WireError::Policy(PolicyError::Invalid(e)))?
-            .rot_bins();
+        let parsed =
+            QuantizedPolicy::parse(blob).map_err(|e| WireError::Policy(PolicyError::Invalid(e)))?;
+        let (found, instrument) = (parsed.rot_bins(), parsed.instrument());
         if found != up.rot_bins {
             return Err(WireError::Policy(PolicyError::WrongRotBins { found }));
         }
         self.slot[..len].copy_from_slice(blob);
         self.slot_len = len;
         self.slot_rot_bins = found;
+        self.slot_instrument = instrument;
         Ok(self.policy_info(found))
     }
 
@@ -289,7 +302,7 @@ impl Controller {
             AgentKind::Learnt | AgentKind::Oigm | AgentKind::OigmCost | AgentKind::Eem => {
                 return bad(ParamError::AgentUnavailable)
             }
-            AgentKind::LearntInt8 if self.policy_for(p.rot_bins).is_none() => {
+            AgentKind::LearntInt8 if self.policy_for(p.config.instrument, p.rot_bins).is_none() => {
                 return bad(ParamError::AgentUnavailable)
             }
             _ => {}
@@ -315,7 +328,7 @@ impl Controller {
         self.upload = None;
         let agent = if p.agent == AgentKind::LearntInt8 {
             DeviceAgent::Int8(
-                self.policy_for(p.rot_bins)
+                self.policy_for(p.config.instrument, p.rot_bins)
                     .ok_or(WireError::InvalidParams(ParamError::AgentUnavailable))?
                     .0,
             )

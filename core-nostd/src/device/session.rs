@@ -769,6 +769,45 @@ mod tests {
         ));
     }
 
+    /// A blob serves only episodes of its instrument profile: with the paper's sensor's blob
+    /// alone on board, an EDM-only `learnt-int8` episode is refused in words (typed), and
+    /// the same episode on the blob's own profile starts.
+    #[test]
+    fn a_blob_serves_only_its_instrument() {
+        use crate::episode::InstrumentProfile;
+        static ONLY_SCAN: [&[u8]; 1] = [crate::policy::builtin::K10];
+        let mut s = Session::new(SessionConfig {
+            policies: &ONLY_SCAN,
+            ..CFG
+        });
+        call(
+            &mut s,
+            1,
+            &Request::Hello {
+                protocol: PROTOCOL_VERSION,
+            },
+        );
+        call(
+            &mut s,
+            2,
+            &Request::LoadPlan {
+                vertices: rect_4x3_wire(),
+            },
+        );
+        let mut p = params(5);
+        p.agent = AgentKind::LearntInt8;
+        p.config.instrument = InstrumentProfile::Edm;
+        assert_eq!(
+            call(&mut s, 3, &Request::StartEpisode(p)),
+            Response::Error(WireError::InvalidParams(ParamError::AgentUnavailable))
+        );
+        p.config.instrument = InstrumentProfile::EdmScan;
+        assert!(matches!(
+            call(&mut s, 4, &Request::StartEpisode(p)),
+            Response::Act { step: 0, .. }
+        ));
+    }
+
     #[test]
     fn bad_inputs_get_typed_errors() {
         let mut s = Session::new(CFG);

@@ -1,6 +1,7 @@
 //! What an episode is (§3.1, §4.2), shared by the host runner and the firmware session:
 //! the actions and their costs ([`actions`]), what the instrument reports ([`Observation`],
-//! [`ObservationError`]), the episode's fixed configuration ([`EpisodeConfig`]), THE one
+//! [`ObservationError`]), the episode's fixed configuration ([`EpisodeConfig`], with the
+//! [`InstrumentProfile`] it runs on), THE one
 //! parameter type of an episode ([`EpisodeParams`], in [`params`]: what the host sends in
 //! `StartEpisode` and what [`crate::pipeline::Pipeline::start`] takes) and the
 //! instrument-side bookkeeping ([`EpisodeState`]). Imports only [`crate::limits`] and
@@ -90,6 +91,63 @@ impl Observation {
     }
 }
 
+/// What the instrument senses, which decides the policy and the stop's tables that belong to
+/// it. The total stations surveyors own (Leica TPS over GeoCOM) have a motor and a
+/// reflectorless EDM and no camera: [`InstrumentProfile::Edm`]. The paper's sensor adds the
+/// topological camera scan: [`InstrumentProfile::EdmScan`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum InstrumentProfile {
+    /// EDM ranges and the topological scan (the paper's sensor).
+    #[default]
+    EdmScan,
+    /// EDM ranges only: the scan is always empty.
+    Edm,
+}
+
+impl InstrumentProfile {
+    /// Both profiles, in wire order.
+    pub const ALL: [InstrumentProfile; 2] = [InstrumentProfile::EdmScan, InstrumentProfile::Edm];
+
+    /// The name on the command line and in reports.
+    pub const fn name(self) -> &'static str {
+        match self {
+            InstrumentProfile::EdmScan => "edm+scan",
+            InstrumentProfile::Edm => "edm",
+        }
+    }
+
+    /// The profile called `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| p.name() == name)
+    }
+
+    /// The byte that names the profile in an int8 policy blob (`docs/policy-blob.md`).
+    pub const fn code(self) -> u8 {
+        match self {
+            InstrumentProfile::EdmScan => 0,
+            InstrumentProfile::Edm => 1,
+        }
+    }
+
+    /// The profile of blob byte `code`.
+    pub const fn from_code(code: u8) -> Option<Self> {
+        match code {
+            0 => Some(InstrumentProfile::EdmScan),
+            1 => Some(InstrumentProfile::Edm),
+            _ => None,
+        }
+    }
+
+    /// Whether the instrument has the camera that makes the topological scan.
+    pub const fn has_scan(self) -> bool {
+        matches!(self, InstrumentProfile::EdmScan)
+    }
+
+    fn is_edm_scan(&self) -> bool {
+        *self == InstrumentProfile::EdmScan
+    }
+}
+
 /// Fixed parameters of one episode.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeConfig {
@@ -109,6 +167,10 @@ pub struct EpisodeConfig {
     /// calibrated for it ([`crate::stop::StopModel::threshold_for`]). Finite, in (0, 1].
     #[serde(default = "default_stop_risk")]
     pub stop_risk: f32,
+    /// What the instrument senses (the scan is empty without a camera), and so which
+    /// policy and stop tables belong to the episode. Left out of JSON for the paper's sensor.
+    #[serde(default, skip_serializing_if = "InstrumentProfile::is_edm_scan")]
+    pub instrument: InstrumentProfile,
 }
 
 fn default_stop_risk() -> f32 {
@@ -135,7 +197,13 @@ impl EpisodeConfig {
         costs: ActionCosts::DEFAULT,
         min_observability: 0.0,
         stop_risk: crate::limits::DEFAULT_STOP_RISK,
+        instrument: InstrumentProfile::EdmScan,
     };
+
+    /// This configuration on `instrument`.
+    pub const fn on(self, instrument: InstrumentProfile) -> Self {
+        EpisodeConfig { instrument, ..self }
+    }
 
     /// Rotation step in radians.
     pub fn rot_step(&self) -> f32 {

@@ -5,11 +5,12 @@
 //! ([`Termination`]), the one validity check ([`EpisodeParams::check`], typed
 //! [`ParamError`]s) and the registration seed's derivation ([`registration_seed`]).
 //!
-//! **Wire form.** Its serde form is protocol v5's `StartEpisode` payload, byte for byte:
-//! postcard fields in the order agent, seed, steps_per_turn, max_actions, rot_bins,
-//! known_heading, ground_truth, initial_scan, termination, stop_risk, min_observability.
-//! The action costs are not on the wire (the device uses [`ActionCosts::default`]), so the
-//! (de)serialisation is written by hand (a test vector from protocol v5 pins the bytes).
+//! **Wire form.** Its serde form is the `StartEpisode` payload: postcard fields in the
+//! order agent, seed, steps_per_turn, max_actions, rot_bins, known_heading, ground_truth,
+//! initial_scan, termination, stop_risk, min_observability (protocol v5's payload, byte for
+//! byte) and, since protocol v9, the instrument profile. The action costs are not on the
+//! wire (the device uses [`ActionCosts::default`]), so the (de)serialisation is written by
+//! hand (a test vector from protocol v5 pins the bytes before the profile).
 
 use super::{ActionCosts, AgentKind, EpisodeConfig};
 use crate::limits::{MAX_EPISODE_ACTIONS, MAX_ROT_BINS};
@@ -201,7 +202,7 @@ impl EpisodeParams {
     }
 }
 
-const FIELDS: [&str; 11] = [
+const FIELDS: [&str; 12] = [
     "agent",
     "seed",
     "steps_per_turn",
@@ -213,6 +214,7 @@ const FIELDS: [&str; 11] = [
     "termination",
     "stop_risk",
     "min_observability",
+    "instrument",
 ];
 
 impl Serialize for EpisodeParams {
@@ -229,6 +231,7 @@ impl Serialize for EpisodeParams {
         st.serialize_field(FIELDS[8], &self.termination)?;
         st.serialize_field(FIELDS[9], &self.config.stop_risk)?;
         st.serialize_field(FIELDS[10], &self.config.min_observability)?;
+        st.serialize_field(FIELDS[11], &self.config.instrument)?;
         st.end()
     }
 }
@@ -239,7 +242,7 @@ impl<'de> Deserialize<'de> for EpisodeParams {
         impl<'de> Visitor<'de> for V {
             type Value = EpisodeParams;
             fn expecting(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-                f.write_str("the 11 fields of a StartEpisode")
+                f.write_str("the 12 fields of a StartEpisode")
             }
             fn visit_seq<A: SeqAccess<'de>>(self, mut a: A) -> Result<EpisodeParams, A::Error> {
                 let mut i = 0;
@@ -265,6 +268,7 @@ impl<'de> Deserialize<'de> for EpisodeParams {
                 let termination = field!();
                 let stop_risk = field!();
                 let min_observability = field!();
+                let instrument = field!();
                 Ok(EpisodeParams {
                     agent,
                     seed,
@@ -279,6 +283,7 @@ impl<'de> Deserialize<'de> for EpisodeParams {
                         costs: ActionCosts::default(),
                         min_observability,
                         stop_risk,
+                        instrument,
                     },
                 })
             }

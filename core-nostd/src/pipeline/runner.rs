@@ -39,6 +39,8 @@ pub struct EpisodeRunner {
     history: History,
     stop: Option<Stop>,
     no_returns: u16,
+    /// Rotations since the last measurement (for the never-stall rule).
+    rotations_in_a_row: u16,
     heading_offset: f32,
 }
 
@@ -64,6 +66,7 @@ impl EpisodeRunner {
             history: History::new(),
             stop: None,
             no_returns: 0,
+            rotations_in_a_row: 0,
             heading_offset: 0.0,
         }
     }
@@ -77,6 +80,7 @@ impl EpisodeRunner {
         self.history.start(params.initial_scan);
         self.stop = None;
         self.no_returns = 0;
+        self.rotations_in_a_row = 0;
         self.heading_offset = params.heading();
         Ok(())
     }
@@ -98,13 +102,28 @@ impl EpisodeRunner {
         }
     }
 
-    /// The policy's next action; `None` once the episode is over.
+    /// The policy's next action; `None` once the episode is over. **Never stall:** after a
+    /// whole turn of rotations without a measurement ([`Self::stall_limit`]) the next action
+    /// is a measurement whatever the policy says: every bearing has passed, so turning on
+    /// cannot show the policy anything new, and a reading can still help. (The policy is
+    /// asked all the same, so a stateful or random policy's stream stays as it was.)
     pub fn decide(&self, policy: &mut dyn Policy) -> Option<Action> {
         if self.is_over() {
-            None
-        } else {
-            Some(policy.act(&self.input()))
+            return None;
         }
+        let action = policy.act(&self.input());
+        Some(
+            if action != Action::Measure && self.rotations_in_a_row >= self.stall_limit() {
+                Action::Measure
+            } else {
+                action
+            },
+        )
+    }
+
+    /// Rotations in a row after which [`Self::decide`] measures: one whole turn.
+    pub fn stall_limit(&self) -> u16 {
+        self.state.config.steps_per_turn
     }
 
     /// Checks an instrument answer to `action` without booking it.
@@ -123,6 +142,10 @@ impl EpisodeRunner {
         Self::validate(action, obs)?;
         self.state.apply(action);
         self.history.push(action, obs.scan);
+        self.rotations_in_a_row = match action {
+            Action::Measure => 0,
+            _ => self.rotations_in_a_row.saturating_add(1),
+        };
         Ok(match (action, obs.range) {
             (Action::Measure, Some(range)) => {
                 // A range of exactly 0 is valid on the wire but not a vote: it counts as
@@ -187,6 +210,56 @@ mod tests {
     use crate::limits::SCAN_PIXELS;
     use crate::pipeline::Termination;
     use crate::policy::BaselineAgent;
+
+    /// A policy that only ever rotates still measures once every whole turn: the runner
+    /// overrides the rotation after `stall_limit` rotations in a row, and only then.
+    #[test]
+    fn a_policy_that_only_turns_is_made_to_measure_once_a_turn() {
+        struct Spinner;
+        impl Policy for Spinner {
+            fn act(&mut self, _: &PolicyInput<'_>) -> Action {
+                Action::RotateLeft
+            }
+        }
+        let plan = crate::fixtures::centred_rect(6.0, 4.0);
+        let mut r = EpisodeRunner::new_empty();
+        let params = EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 1,
+            rot_bins: 10,
+            known_heading: None,
+            ground_truth: None,
+            initial_scan: 0,
+            termination: Termination::ActionLimit,
+            config: EpisodeConfig {
+                steps_per_turn: 12,
+                max_actions: 60,
+                ..EpisodeConfig::DEFAULT
+            },
+        };
+        r.start(&plan, &params).unwrap();
+        assert_eq!(r.stall_limit(), 12);
+        let mut taken = [Action::RotateRight; 60];
+        let mut n = 0;
+        while let Some(a) = r.decide(&mut Spinner) {
+            let obs = Observation {
+                range: (a == Action::Measure).then_some(2.0),
+                scan: 0,
+            };
+            r.observe(a, &obs).unwrap();
+            taken[n] = a;
+            n += 1;
+        }
+        assert_eq!(n, 60);
+        for (i, a) in taken.iter().enumerate() {
+            let want = if i % 13 == 12 {
+                Action::Measure
+            } else {
+                Action::RotateLeft
+            };
+            assert_eq!(*a, want, "action {i}");
+        }
+    }
 
     #[test]
     fn rejects_bad_answers_and_keeps_state() {

@@ -28,7 +28,8 @@ impl Pipeline {
                     self.remember_if_best(risk);
                     Some((risk, f.readings))
                 });
-                let model = StopModel::for_rot_bins(self.params.rot_bins);
+                let model =
+                    StopModel::built_in(self.params.config.instrument, self.params.rot_bins);
                 let (agent, p) = (self.params.agent, self.params.config.stop_risk);
                 estimate
                     .filter(|&(risk, bearings)| model.stops(agent, risk, bearings, p))
@@ -112,7 +113,7 @@ impl Pipeline {
         let Some(peak_mass) = self.stop_gate() else {
             return false;
         };
-        let model = StopModel::for_rot_bins(self.params.rot_bins);
+        let model = StopModel::built_in(self.params.config.instrument, self.params.rot_bins);
         // The features but the margin once: the belief's entropy and the readings'
         // observability are whole passes, the same for every margin.
         let Some(f) = self.features_with(peak_mass, refined, 0.0) else {
@@ -290,7 +291,7 @@ impl Pipeline {
     }
 
     pub(super) fn risk_of(&self, f: &StopFeatures) -> f32 {
-        StopModel::for_rot_bins(self.params.rot_bins).risk(f)
+        StopModel::built_in(self.params.config.instrument, self.params.rot_bins).risk(f)
     }
 
     /// The cell the confident stop answers with: the one the refined pose lies in (`None`

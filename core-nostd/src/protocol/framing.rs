@@ -291,25 +291,26 @@ mod tests {
         }
     }
 
-    /// Protocol v5 frames, byte for byte: a block of 254 non-zero bytes at the end is
-    /// followed by the code byte 0x01 (the `cobs` crate omits it), and a `StartEpisode`
-    /// frame encoded by the protocol-v5 code (before the one `EpisodeParams`).
+    /// Frames byte for byte: a block of 254 non-zero bytes at the end is followed by the
+    /// code byte 0x01 (the `cobs` crate omits it), and a `StartEpisode` frame: protocol v5's
+    /// payload (encoded by the code before the one `EpisodeParams`) and, since v9, the
+    /// instrument profile's byte, then the frame's CRC.
     #[test]
-    fn frame_bytes_are_protocol_v5() {
+    fn frame_bytes_are_protocol_v9() {
         let mut enc = [0u8; 300];
         let n = cobs_encode(&[0xFF; 254], &mut enc).unwrap();
         assert_eq!((n, enc[0], enc[255]), (256, 0xFF, 0x01));
-        const V5_START_EPISODE: [u8; 49] = [
+        const V9_START_EPISODE: [u8; 50] = [
             17, 42, 3, 4, 239, 155, 175, 205, 248, 172, 209, 145, 1, 54, 100, 10, 1, 1, 4, 128, 62,
-            1, 1, 1, 2, 63, 1, 3, 128, 190, 1, 9, 128, 63, 22, 1, 205, 204, 76, 61, 1, 1, 6, 62,
-            242, 155, 139, 156, 0,
+            1, 1, 1, 2, 63, 1, 3, 128, 190, 1, 9, 128, 63, 22, 1, 205, 204, 76, 61, 1, 1, 2, 62, 5,
+            38, 247, 45, 129, 0,
         ];
         let mut out = [0u8; MAX_FRAME];
         let n = encode_frame(42, &Request::StartEpisode(episode_params()), &mut out).unwrap();
-        assert_eq!(out[..n], V5_START_EPISODE);
-        let mut f = V5_START_EPISODE;
+        assert_eq!(out[..n], V9_START_EPISODE);
+        let mut f = V9_START_EPISODE;
         assert_eq!(
-            decode_frame::<Request>(&mut f[..48]).unwrap(),
+            decode_frame::<Request>(&mut f[..49]).unwrap(),
             (42, Request::StartEpisode(episode_params()))
         );
     }
@@ -402,6 +403,7 @@ mod tests {
                 max_actions: 100,
                 costs: ActionCosts::default(),
                 stop_risk: 0.05,
+                instrument: crate::episode::InstrumentProfile::EdmScan,
                 min_observability: 0.125,
             },
         }
@@ -415,12 +417,14 @@ mod tests {
         off.config.stop_risk = 1.0;
         off.config.min_observability = 0.0;
         roundtrip(&Request::StartEpisode(off));
-        // v4 layout: the two f32 close the message, stop_risk first, each 4 raw LE bytes.
+        // v4 layout: the two f32 follow the rule, stop_risk first, each 4 raw LE bytes; since
+        // v9 the instrument profile's byte closes the message.
         let mut raw = [0u8; MAX_PAYLOAD];
         let body = postcard::to_slice(&(42u16, Request::StartEpisode(p)), &mut raw).unwrap();
-        let n = body.len();
+        let n = body.len() - 1;
+        assert_eq!(body[n], 0, "the paper's sensor");
         assert_eq!(&body[n - 8..n - 4], &0.05f32.to_le_bytes());
-        assert_eq!(&body[n - 4..], &0.125f32.to_le_bytes());
+        assert_eq!(&body[n - 4..n], &0.125f32.to_le_bytes());
         // A v3 StartEpisode (the same message without the two fields) no longer decodes.
         let crc = crc32(&body[..n - 8]);
         raw[n - 8..n - 4].copy_from_slice(&crc.to_le_bytes());

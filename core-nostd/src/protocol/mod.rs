@@ -33,7 +33,7 @@ pub use framing::*;
 pub use messages::*;
 
 /// Protocol version; bumped on every incompatible change of a message or of the framing.
-pub const PROTOCOL_VERSION: u16 = 8;
+pub const PROTOCOL_VERSION: u16 = 9;
 /// The id carried by device replies to frames whose own id could not be read.
 pub const NO_ID: u16 = 0;
 /// Largest CRC-protected payload (postcard bytes + 4 CRC bytes).

@@ -26,9 +26,10 @@
 //! the stop no longer waits for the voting belief to sharpen.
 
 pub mod calibration;
+pub mod calibration_edm;
 pub mod rivals;
 
-use crate::episode::AgentKind;
+use crate::episode::{AgentKind, InstrumentProfile};
 use crate::registration::pose_distance::Tolerance;
 use crate::world::math::{exp, ln};
 use serde::{Deserialize, Serialize};
@@ -272,6 +273,33 @@ impl StopModel {
         interpolate_table(self.table_for(agent), p)
     }
 
+    /// The calibrated risk of an answer whose [`stop_score`] is `score`: the smallest stated
+    /// risk P (of `--stop-risk`, in `(0, 1]`) at which `agent`'s stop would answer with it,
+    /// the inverse of [`Self::threshold_for`]. This is the number `--stop-risk` bounds;
+    /// the score itself is the model's raw estimate, not a probability of this answer.
+    pub fn calibrated_risk(&self, agent: AgentKind, score: f32) -> f32 {
+        if score.is_nan() {
+            return 1.0;
+        }
+        // threshold_for grows with P: bisect in ln P between 1e-6 and 1.
+        let (mut lo, mut hi) = (ln(1e-6), 0.0f32);
+        if score < self.threshold_for(agent, exp(lo)) {
+            return exp(lo);
+        }
+        if score >= self.threshold_for(agent, 1.0) {
+            return 1.0;
+        }
+        for _ in 0..40 {
+            let mid = 0.5 * (lo + hi);
+            if score < self.threshold_for(agent, exp(mid)) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        exp(hi)
+    }
+
     /// Whether the estimate `risk` after `bearings` distinct bearings lets `agent`'s stop
     /// answer at the stated risk `p` (its [`stop_score`] is below the threshold).
     pub fn stops(&self, agent: AgentKind, risk: f32, bearings: u16, p: f32) -> bool {
@@ -295,10 +323,15 @@ impl StopModel {
         }
     }
 
-    /// The built-in model for `rot_bins` ([`crate::stop::calibration::MODELS`]): the one fitted
-    /// for that K, else the one fitted for the nearest K.
-    pub fn for_rot_bins(rot_bins: u8) -> &'static StopModel {
-        let models = crate::stop::calibration::MODELS;
+    /// The built-in model of `instrument` for `rot_bins` (the paper's sensor:
+    /// [`crate::stop::calibration::MODELS`]; EDM only: [`crate::stop::calibration_edm::MODELS`],
+    /// each fitted on its own profile's episodes): the one fitted for that K, else the one
+    /// fitted for the nearest K.
+    pub fn built_in(instrument: InstrumentProfile, rot_bins: u8) -> &'static StopModel {
+        let models = match instrument {
+            InstrumentProfile::EdmScan => crate::stop::calibration::MODELS,
+            InstrumentProfile::Edm => crate::stop::calibration_edm::MODELS,
+        };
         let mut best = &models[0];
         for m in models.iter() {
             if m.rot_bins.abs_diff(rot_bins) < best.rot_bins.abs_diff(rot_bins) {
@@ -306,6 +339,11 @@ impl StopModel {
             }
         }
         best
+    }
+
+    /// The built-in model for `rot_bins` of the paper's sensor ([`Self::built_in`]).
+    pub fn for_rot_bins(rot_bins: u8) -> &'static StopModel {
+        Self::built_in(InstrumentProfile::EdmScan, rot_bins)
     }
 }
 
@@ -327,6 +365,31 @@ pub fn interpolate_table(t: &[f32; STATED_RISKS.len()], p: f32) -> f32 {
     let i = (1..=last).find(|&i| p <= s[i]).unwrap_or(last);
     let f = (ln(p) - ln(s[i - 1])) / (ln(s[i]) - ln(s[i - 1]));
     exp(ln(t[i - 1].max(1e-9)) + f * (ln(t[i].max(1e-9)) - ln(t[i - 1].max(1e-9))))
+}
+
+#[cfg(test)]
+mod calibrated_risk_tests {
+    use super::*;
+
+    /// The calibrated risk inverts the threshold table: a score just under P's threshold
+    /// is answered at P and given a risk ≤ P, and the stop answers at the risk it is given.
+    #[test]
+    fn the_calibrated_risk_inverts_the_threshold_table() {
+        for instrument in InstrumentProfile::ALL {
+            for k in [1u8, 10] {
+                let m = StopModel::built_in(instrument, k);
+                for agent in [AgentKind::Learnt, AgentKind::Heuristic1, AgentKind::Blind0] {
+                    for &p in &STATED_RISKS {
+                        let score = m.threshold_for(agent, p) * 0.999;
+                        let r = m.calibrated_risk(agent, score);
+                        assert!(r <= p * 1.0001, "{agent:?} K = {k}: {r} > {p}");
+                        assert!(score < m.threshold_for(agent, r * 1.0001));
+                    }
+                    assert_eq!(m.calibrated_risk(agent, f32::NAN), 1.0);
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]

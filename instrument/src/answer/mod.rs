@@ -27,7 +27,9 @@ mod text;
 
 use crate::episode::Trajectory;
 use crate::world::planfile::PlanFrame;
-use activesense_core::episode::{Action, EpisodeConfig, EpisodeParams, EpisodeState, Observation};
+use activesense_core::episode::{
+    Action, AgentKind, EpisodeConfig, EpisodeParams, EpisodeState, InstrumentProfile, Observation,
+};
 use activesense_core::protocol::EpisodeReport;
 use activesense_core::registration::precision::{pose_covariance, PoseCovariance};
 use activesense_core::registration::{Measurement, Observations};
@@ -187,7 +189,12 @@ pub struct Answer {
     pub readings: Vec<Reading>,
     /// How many of them the pose explains (the others were left out as outliers).
     pub readings_explained: u16,
-    /// The calibrated stop's estimate of P(wrong answer), when it has one.
+    /// The risk that this answer is wrong, as `--stop-risk` states risks: the smallest
+    /// stated risk at which the calibrated stop answers with it (its tables, inverted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub risk: Option<f64>,
+    /// The calibrated stop's raw estimate (the model's score before its tables), when it
+    /// has one: for analysis, not the answer's risk.
     pub stop_risk: Option<f64>,
     /// Every pose consistent with the readings, most probable first (the answer's first).
     pub candidates: Vec<Candidate>,
@@ -221,6 +228,8 @@ pub struct AnswerInput<'a> {
     pub symmetry_order: u8,
     /// The stop's risk estimate.
     pub stop_risk: Option<f32>,
+    /// Whose stop tables state the risk: the agent, the instrument and K.
+    pub stop_tables: Option<(AgentKind, InstrumentProfile, u8)>,
     /// The simulated truth.
     pub truth: Option<Pose2>,
     /// The user's heading hint.
@@ -290,6 +299,7 @@ impl Answer {
             unknowns,
             readings,
             readings_explained: 0,
+            risk: calibrated_risk(i),
             stop_risk: i.stop_risk.map(f64::from),
             candidates: Vec::new(),
             ambiguous: false,
@@ -522,6 +532,7 @@ impl Answer {
             heading_known: t.spec.rot_bins == 1,
             symmetry_order: o.symmetry_order,
             stop_risk: o.stop_risk,
+            stop_tables: Some((t.spec.agent, t.spec.config.instrument, t.spec.rot_bins)),
             truth: Some(t.truth),
             hint,
             range_sigma: t.spec.sensor.sigma,
@@ -555,11 +566,26 @@ impl Answer {
             heading_known: params.known_heading.is_some(),
             symmetry_order: symmetry_order(plan, &SymmetryTolerance::default()),
             stop_risk: report.stop_risk,
+            stop_tables: Some((params.agent, params.config.instrument, params.rot_bins)),
             truth: params.ground_truth,
             hint,
             range_sigma,
         })
     }
+}
+
+/// The answer's risk as the calibrated stop states risks ([`Answer::risk`]): its raw
+/// estimate, scored over the distinct bearings read, through the tables of its agent,
+/// instrument and K.
+fn calibrated_risk(i: &AnswerInput<'_>) -> Option<f64> {
+    let (agent, instrument, k) = i.stop_tables?;
+    let raw = i.stop_risk?;
+    let mut bearings: Vec<u32> = i.readings.iter().map(|m| m.bearing.to_bits()).collect();
+    bearings.sort_unstable();
+    bearings.dedup();
+    let score = activesense_core::stop::stop_score(raw, bearings.len() as u16);
+    let model = activesense_core::stop::StopModel::built_in(instrument, k);
+    Some(f64::from(model.calibrated_risk(agent, score)))
 }
 
 /// The answer's readings of a remote episode: the returned ranges of `steps` at the encoder
@@ -620,6 +646,7 @@ mod tests {
             heading_known,
             symmetry_order: 2,
             stop_risk: Some(0.004),
+            stop_tables: None,
             truth: Some(pose),
             hint: None,
             range_sigma: 0.01,

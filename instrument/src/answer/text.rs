@@ -88,9 +88,12 @@ impl Answer {
         );
         let _ = writeln!(
             s,
-            "  stated risk of a wrong answer: {}",
-            match self.stop_risk {
-                Some(r) => format!("{:.2} %", 100.0 * r),
+            "  risk that this answer is wrong: {}",
+            match self.risk {
+                Some(r) => format!(
+                    "{} (the smallest --stop-risk at which the calibrated stop answers with it)",
+                    percent(r)
+                ),
                 None => "not available (belief below the stop's gate, or no registration)".into(),
             }
         );
@@ -152,5 +155,17 @@ impl Answer {
             s.push('\n');
         }
         s
+    }
+}
+
+/// A risk as a percentage with the digits it needs (0.10 %, 1.0 %, 12 %).
+fn percent(r: f64) -> String {
+    let p = 100.0 * r;
+    if p < 1.0 {
+        format!("{p:.2} %")
+    } else if p < 10.0 {
+        format!("{p:.1} %")
+    } else {
+        format!("{p:.0} %")
     }
 }

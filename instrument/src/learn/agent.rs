@@ -6,7 +6,7 @@
 
 use super::file::{self, LoadError};
 use super::net::{NetShape, PolicyNet, Scratch};
-use activesense_core::episode::Action;
+use activesense_core::episode::{Action, InstrumentProfile};
 use activesense_core::policy::{Policy, PolicyInput, BELIEF_PLANE, SIDE_FEATURES};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -79,6 +79,17 @@ impl InputMask {
             .and_then(|h| h.get("inputs"))
             .and_then(|v| serde_json::from_value(v.clone()).ok())
             .unwrap_or_default()
+    }
+
+    /// The instrument a network trained with this mask is for: the scan-blind network is
+    /// the EDM-only instrument's, the full one the paper's sensor's; a network denied its
+    /// belief map is an ablation, no instrument's.
+    pub fn instrument(self) -> Option<InstrumentProfile> {
+        match self {
+            InputMask::Full => Some(InstrumentProfile::EdmScan),
+            InputMask::NoScans => Some(InstrumentProfile::Edm),
+            InputMask::NoBelief => None,
+        }
     }
 
     /// Zeroes the denied inputs in place.
@@ -172,14 +183,23 @@ impl LearntPolicy {
     }
 }
 
-/// The committed policy file for `rot_bins`: `policies/k{K}/policy.policy` at the workspace
-/// root (the `--out` directory of its training run, with its log and learning curve).
+/// The committed policy file for `rot_bins` of the paper's sensor:
+/// `policies/k{K}/policy.policy` at the workspace root (the `--out` directory of its
+/// training run, with its log and learning curve).
 pub fn default_policy_path(rot_bins: u8) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
+    default_policy_path_for(InstrumentProfile::EdmScan, rot_bins)
+}
+
+/// The committed policy file for `rot_bins` on `instrument`: `policies/k{K}/` for the
+/// paper's sensor, `policies/edm/k{K}/` for the EDM-only instrument.
+pub fn default_policy_path_for(instrument: InstrumentProfile, rot_bins: u8) -> PathBuf {
+    let mut p = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("..")
-        .join("policies")
-        .join(format!("k{rot_bins}"))
-        .join("policy.policy")
+        .join("policies");
+    if instrument == InstrumentProfile::Edm {
+        p = p.join("edm");
+    }
+    p.join(format!("k{rot_bins}")).join("policy.policy")
 }
 
 /// A [`Policy`] that runs the float network.
@@ -225,6 +245,8 @@ impl Policy for LearntAgent {
 pub struct Int8Policy {
     /// The blob's K.
     pub rot_bins: u8,
+    /// The instrument the blob's network was trained for.
+    pub instrument: InstrumentProfile,
     /// The bytes.
     pub blob: Arc<Vec<u8>>,
     /// Its origin: a file, or the policy built into the firmware.
@@ -234,11 +256,12 @@ pub struct Int8Policy {
 impl Int8Policy {
     /// Validates `blob` (CRC included).
     pub fn new(blob: Vec<u8>, origin: String) -> anyhow::Result<Self> {
-        let rot_bins = activesense_core::policy::int8::QuantizedPolicy::parse(&blob)
-            .map_err(|e| anyhow::anyhow!("{origin} is not a usable int8 policy blob: {e}"))?
-            .rot_bins();
+        let parsed = activesense_core::policy::int8::QuantizedPolicy::parse(&blob)
+            .map_err(|e| anyhow::anyhow!("{origin} is not a usable int8 policy blob: {e}"))?;
+        let (rot_bins, instrument) = (parsed.rot_bins(), parsed.instrument());
         Ok(Int8Policy {
             rot_bins,
+            instrument,
             blob: Arc::new(blob),
             origin,
         })

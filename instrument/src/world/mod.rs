@@ -133,6 +133,10 @@ impl SimWorld {
 
     /// The scan at the current bearing (also sent at episode start).
     pub fn scan(&mut self) -> u32 {
+        // An instrument without a camera sees no scan, and draws nothing for one.
+        if !self.state.config.instrument.has_scan() {
+            return 0;
+        }
         let px = self.sensor.scan(
             &self.plan,
             self.position(),

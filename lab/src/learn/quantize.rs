@@ -22,17 +22,16 @@
 //! The integer inference is the core's, integer-only, so what the host computes here is
 //! bit for bit what the instrument computes from the same blob and the same state.
 
-use activesense_core::episode::EpisodeConfig;
+use activesense_core::episode::InstrumentProfile;
 use activesense_core::episode::{Action, AgentKind};
 use activesense_core::policy::int8::{
     self as q, LayerTensors, QuantParams, QuantizedAgent, QuantizedPolicy,
 };
 use activesense_core::policy::{Policy, PolicyInput, SIDE_FEATURES};
-use activesense_instrument::episode::{run_episode_with, EpisodeSpec, Termination, Trajectory};
+use activesense_instrument::episode::{run_episode_with, EpisodeSpec, Trajectory};
 use activesense_instrument::learn::agent::{argmax, features, shape_for, LearntAgent, ACTIONS};
 use activesense_instrument::learn::net::{PolicyNet, Scratch, ARCH_ID, N_LAYERS};
 use activesense_instrument::world::plans;
-use activesense_instrument::world::sensor::SensorModel;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;
@@ -154,15 +153,24 @@ impl<F: FnMut(&[f32], &[f32])> Policy for Recording<F> {
     }
 }
 
-/// Episode `i` of the calibration set for `rot_bins` (training plans only).
-pub fn calibration_specs(rot_bins: u8, episodes: usize, seed: u64) -> Vec<EpisodeSpec> {
+/// Episode `i` of the calibration set for `rot_bins` on `instrument` (training plans only).
+pub fn calibration_specs(
+    rot_bins: u8,
+    instrument: InstrumentProfile,
+    episodes: usize,
+    seed: u64,
+) -> Vec<EpisodeSpec> {
     let mut rng = Pcg64::seed_from_u64(seed ^ 0x7175_616e_7469_7a65);
     (0..episodes)
-        .map(|_| EpisodeSpec {
-            plan_seed: rng.gen_range(plans::TRAIN_SEEDS),
-            episode_seed: rng.gen(),
-            rot_bins,
-            ..EpisodeSpec::new(0, AgentKind::Learnt)
+        .map(|_| {
+            let mut spec = EpisodeSpec {
+                plan_seed: rng.gen_range(plans::TRAIN_SEEDS),
+                episode_seed: rng.gen(),
+                rot_bins,
+                ..EpisodeSpec::new(0, AgentKind::Learnt)
+            };
+            spec.config.instrument = instrument;
+            spec
         })
         .collect()
 }
@@ -181,9 +189,14 @@ fn record_episode(net: &Arc<PolicyNet>, spec: &EpisodeSpec, sink: impl FnMut(&[f
 
 /// Activation ranges of `net` over the states of `episodes` greedy episodes on training
 /// plans drawn from `seed` (parallel over episodes; the result does not depend on it).
-pub fn calibration_ranges(net: &PolicyNet, episodes: usize, seed: u64) -> Ranges {
+pub fn calibration_ranges(
+    net: &PolicyNet,
+    instrument: InstrumentProfile,
+    episodes: usize,
+    seed: u64,
+) -> Ranges {
     let net = Arc::new(net.clone());
-    let specs = calibration_specs(net.shape.rot_bins as u8, episodes, seed);
+    let specs = calibration_specs(net.shape.rot_bins as u8, instrument, episodes, seed);
     specs
         .par_iter()
         .map(|spec| {
@@ -199,13 +212,14 @@ pub fn calibration_ranges(net: &PolicyNet, episodes: usize, seed: u64) -> Ranges
 /// step (a K = 10 state is 36 KB of floats).
 pub fn calibration_states(
     net: &PolicyNet,
+    instrument: InstrumentProfile,
     episodes: usize,
     seed: u64,
     stride: usize,
 ) -> Vec<(Vec<f32>, Vec<f32>)> {
     let net = Arc::new(net.clone());
     let stride = stride.max(1);
-    calibration_specs(net.shape.rot_bins as u8, episodes, seed)
+    calibration_specs(net.shape.rot_bins as u8, instrument, episodes, seed)
         .par_iter()
         .map(|spec| {
             let mut out = Vec::new();
@@ -339,8 +353,8 @@ fn quantize_layer(
     }
 }
 
-/// Quantises `net` with activation ranges `r` into blob bytes.
-pub fn quantize_with_ranges(net: &PolicyNet, r: &Ranges) -> Vec<u8> {
+/// Quantises `net`, trained for `instrument`, with activation ranges `r` into blob bytes.
+pub fn quantize_with_ranges(net: &PolicyNet, instrument: InstrumentProfile, r: &Ranges) -> Vec<u8> {
     let belief = activation_params(r.belief_input);
     let side = activation_params(r.side_input);
     let a1 = activation_params(r.conv1);
@@ -367,21 +381,31 @@ pub fn quantize_with_ranges(net: &PolicyNet, r: &Ranges) -> Vec<u8> {
     });
     let k = net.shape.rot_bins as u8;
     let mut out = vec![0u8; q::blob_len(ARCH_ID, k as usize)];
-    let n = q::write_blob(&mut out, ARCH_ID, k, belief, side, &tensors)
+    let n = q::write_blob(&mut out, ARCH_ID, k, instrument, belief, side, &tensors)
         .expect("tensor lengths follow the architecture");
     out.truncate(n);
     out
 }
 
 /// Quantises `net`, calibrating on `calibration` (belief, side) states.
-pub fn quantize(net: &PolicyNet, calibration: &[(Vec<f32>, Vec<f32>)]) -> Vec<u8> {
-    quantize_with_ranges(net, &Ranges::of(net, calibration))
+pub fn quantize(
+    net: &PolicyNet,
+    instrument: InstrumentProfile,
+    calibration: &[(Vec<f32>, Vec<f32>)],
+) -> Vec<u8> {
+    quantize_with_ranges(net, instrument, &Ranges::of(net, calibration))
 }
 
-/// Calibrates `net` on `episodes` training episodes drawn from `seed` and quantises it.
-pub fn quantize_calibrated(net: &PolicyNet, episodes: usize, seed: u64) -> (Vec<u8>, Ranges) {
-    let r = calibration_ranges(net, episodes, seed);
-    (quantize_with_ranges(net, &r), r)
+/// Calibrates `net` (trained for `instrument`) on `episodes` training episodes drawn from
+/// `seed` and quantises it.
+pub fn quantize_calibrated(
+    net: &PolicyNet,
+    instrument: InstrumentProfile,
+    episodes: usize,
+    seed: u64,
+) -> (Vec<u8>, Ranges) {
+    let r = calibration_ranges(net, instrument, episodes, seed);
+    (quantize_with_ranges(net, instrument, &r), r)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -479,18 +503,13 @@ pub struct Agreement {
     pub blob_crc: u32,
 }
 
-/// The evaluation's episode for test plan `plan_seed` (oracle termination, 100 actions).
-pub fn test_spec(plan_seed: u32, rot_bins: u8) -> EpisodeSpec {
-    EpisodeSpec {
-        plan_seed,
-        episode_seed: 0,
-        agent: AgentKind::Learnt,
-        rot_bins,
-        config: EpisodeConfig::default(),
-        sensor: SensorModel::default(),
-        termination: Termination::Oracle,
-        user_plan: None,
-    }
+/// The evaluation's episode for test plan `plan_seed` on `instrument` (oracle termination,
+/// 100 actions).
+pub fn test_spec(plan_seed: u32, rot_bins: u8, instrument: InstrumentProfile) -> EpisodeSpec {
+    let mut spec = EpisodeSpec::new(plan_seed, AgentKind::Learnt);
+    spec.rot_bins = rot_bins;
+    spec.config.instrument = instrument;
+    spec
 }
 
 /// Plays `plans` test plans with the float agent (the int8 network deciding alongside) and
@@ -508,7 +527,7 @@ pub fn agreement(net: &PolicyNet, blob: &[u8], plans: usize) -> Result<Agreement
     let runs: Vec<(Trajectory, Trajectory, usize, usize, f32)> = seeds
         .par_iter()
         .map(|&seed| {
-            let spec = test_spec(seed, k);
+            let spec = test_spec(seed, k, policy.instrument());
             let mut shadow = Shadow {
                 float: LearntAgent::new(net.clone()),
                 int8: QuantizedAgent::new(policy),
@@ -658,9 +677,9 @@ mod tests {
     fn int8_agrees_with_float_and_blobs_round_trip() {
         for k in [1u8, 10] {
             let net = random_net(k, 1);
-            let states = calibration_states(&net, 8, 5, 1);
+            let states = calibration_states(&net, InstrumentProfile::EdmScan, 8, 5, 1);
             assert!(states.len() > 20);
-            let blob = quantize(&net, &states);
+            let blob = quantize(&net, InstrumentProfile::EdmScan, &states);
             // Round trip through the core's validator.
             let p = QuantizedPolicy::parse(&blob).expect("valid blob");
             assert_eq!(p.rot_bins(), k);
@@ -675,9 +694,9 @@ mod tests {
                 assert!((f - i as f32 * row_max / 127.0).abs() <= row_max / 254.0 + 1e-7);
             }
             // Same blob from the same calibration: deterministic.
-            assert_eq!(blob, quantize(&net, &states));
+            assert_eq!(blob, quantize(&net, InstrumentProfile::EdmScan, &states));
             // Held-out states (other training episodes) and whole test episodes.
-            let held_out = calibration_states(&net, 4, 99, 1);
+            let held_out = calibration_states(&net, InstrumentProfile::EdmScan, 4, 99, 1);
             let agree = action_agreement(&net, &blob, &held_out);
             assert!(agree >= 0.95, "K = {k}: state agreement {agree}");
             let mut seen = 0;
@@ -689,7 +708,7 @@ mod tests {
                     seen: 0,
                     agree: 0,
                 };
-                run_episode_with(&test_spec(seed, k), &mut c);
+                run_episode_with(&test_spec(seed, k, InstrumentProfile::EdmScan), &mut c);
                 seen += c.seen;
                 agreed += c.agree;
             }
@@ -701,7 +720,7 @@ mod tests {
     #[test]
     fn agreement_report_is_consistent() {
         let net = random_net(1, 4);
-        let (blob, ranges) = quantize_calibrated(&net, 3, 1);
+        let (blob, ranges) = quantize_calibrated(&net, InstrumentProfile::EdmScan, 3, 1);
         assert!(ranges.states > 0);
         let a = agreement(&net, &blob, 2).unwrap();
         assert_eq!(a.float.episodes, 2);

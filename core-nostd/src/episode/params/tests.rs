@@ -2,6 +2,7 @@
 //! encoded by the old `wire::EpisodeParams`), its validity check and its seed derivation.
 
 use super::*;
+use crate::episode::InstrumentProfile;
 
 fn params(
     termination: Termination,
@@ -22,6 +23,7 @@ fn params(
             costs: ActionCosts::default(),
             min_observability: 0.125,
             stop_risk: 0.05,
+            instrument: InstrumentProfile::EdmScan,
         },
     }
 }
@@ -35,9 +37,10 @@ fn full() -> EpisodeParams {
 }
 
 /// Encoded by the protocol-v5 `wire::EpisodeParams` (derived serde, before the one
-/// parameter type): the same values must give the same bytes, and decode back.
+/// parameter type): the same values must give the same bytes followed by the instrument
+/// profile (protocol v9; 0 = the paper's sensor, 1 = EDM only), and decode back.
 #[test]
-fn wire_bytes_equal_protocol_v5() {
+fn wire_bytes_are_protocol_v5_then_the_instrument() {
     const V5_FULL: [u8; 41] = [
         4, 239, 155, 175, 205, 248, 172, 209, 145, 1, 54, 100, 10, 1, 0, 0, 128, 62, 1, 0, 0, 0,
         63, 0, 0, 128, 190, 0, 0, 128, 63, 22, 1, 205, 204, 76, 61, 0, 0, 0, 62,
@@ -50,12 +53,19 @@ fn wire_bytes_equal_protocol_v5() {
         (full(), &V5_FULL[..]),
         (params(Termination::Oracle, None, None), &V5_BARE[..]),
     ] {
-        let mut raw = [0u8; 64];
-        let got = postcard::to_slice(&p, &mut raw).unwrap();
-        assert_eq!(got, want);
-        let back: EpisodeParams = postcard::from_bytes(want).unwrap();
-        assert_eq!(back, p);
-        assert_eq!(back.config.costs, ActionCosts::default());
+        for (instrument, code) in [(InstrumentProfile::EdmScan, 0), (InstrumentProfile::Edm, 1)] {
+            let mut p = p;
+            p.config.instrument = instrument;
+            let want = [want, &[code]].concat();
+            let mut raw = [0u8; 64];
+            let got = postcard::to_slice(&p, &mut raw).unwrap();
+            assert_eq!(got, &want[..]);
+            let back: EpisodeParams = postcard::from_bytes(&want).unwrap();
+            assert_eq!(back, p);
+            assert_eq!(back.config.costs, ActionCosts::default());
+        }
+        // A protocol-v8 message (no profile) does not decode.
+        assert!(postcard::from_bytes::<EpisodeParams>(want).is_err());
     }
     // A truncated message (a v3 StartEpisode without the stop rule) does not decode.
     assert!(postcard::from_bytes::<EpisodeParams>(&V5_FULL[..V5_FULL.len() - 8]).is_err());

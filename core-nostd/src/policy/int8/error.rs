@@ -26,6 +26,8 @@ pub enum BlobError {
     /// A scale, zero point, multiplier, shift or weight is out of its range, or two tensors
     /// that must share quantisation parameters do not.
     BadQuantization,
+    /// The instrument-profile byte names no profile this code knows.
+    UnknownInstrument(u8),
 }
 
 impl core::fmt::Display for BlobError {
@@ -40,6 +42,7 @@ impl core::fmt::Display for BlobError {
             BlobError::BadChecksum => f.write_str("checksum mismatch (corrupt blob)"),
             BlobError::BadTensorTable => f.write_str("bad tensor table"),
             BlobError::BadQuantization => f.write_str("bad quantisation parameters"),
+            BlobError::UnknownInstrument(c) => write!(f, "unknown instrument profile {c}"),
         }
     }
 }

@@ -32,6 +32,7 @@
 //! [`Fast`] backend, [`kernels`] and `fast` are the layers, [`dot`] the inner products.
 
 use crate::episode::Action;
+pub use crate::episode::InstrumentProfile;
 
 pub mod agent;
 pub mod dot;
@@ -333,6 +334,7 @@ pub struct QuantizedPolicy<'a> {
     bytes: &'a [u8],
     arch: u16,
     rot_bins: u8,
+    instrument: InstrumentProfile,
     belief_input: QuantParams,
     side_input: QuantParams,
     layers: [LayerView<'a>; N_LAYERS],
@@ -356,6 +358,12 @@ impl<'a> QuantizedPolicy<'a> {
     /// Belief planes `K` the network was trained for.
     pub fn rot_bins(&self) -> u8 {
         self.rot_bins
+    }
+
+    /// The instrument the network was trained for (blob byte 18): an EDM-only network never
+    /// saw a scan, and a scan network expects one.
+    pub fn instrument(&self) -> InstrumentProfile {
+        self.instrument
     }
 
     /// Belief values a decision reads: `K × 900`.

@@ -120,7 +120,10 @@ impl<'a> QuantizedPolicy<'a> {
         {
             return Err(BlobError::ShapeMismatch);
         }
-        if rd_u16(b, 18)? != 0 {
+        let [code, reserved] = field::<2>(b, 18)?;
+        let instrument =
+            InstrumentProfile::from_code(code).ok_or(BlobError::UnknownInstrument(code))?;
+        if reserved != 0 {
             return Err(BlobError::BadTensorTable);
         }
         let belief_input = rd_quant(b, 24, 28)?;
@@ -221,6 +224,7 @@ impl<'a> QuantizedPolicy<'a> {
             bytes,
             arch,
             rot_bins,
+            instrument,
             belief_input,
             side_input,
             layers,

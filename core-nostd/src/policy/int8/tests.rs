@@ -44,7 +44,16 @@ fn build_arch(
         .collect();
     let t: [LayerTensors<'_>; N_LAYERS] = t.try_into().ok().unwrap();
     let mut out = vec![0u8; blob_len(arch, k as usize)];
-    let n = write_blob(&mut out, arch, k, belief, side, &t).unwrap();
+    let n = write_blob(
+        &mut out,
+        arch,
+        k,
+        InstrumentProfile::EdmScan,
+        belief,
+        side,
+        &t,
+    )
+    .unwrap();
     assert_eq!(n, out.len());
     out
 }

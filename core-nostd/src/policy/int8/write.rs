@@ -45,6 +45,7 @@ pub fn write_blob(
     out: &mut [u8],
     arch: u16,
     rot_bins: u8,
+    instrument: InstrumentProfile,
     belief_input: QuantParams,
     side_input: QuantParams,
     layers: &[LayerTensors<'_>; N_LAYERS],
@@ -62,6 +63,7 @@ pub fn write_blob(
     put(out, 12, &[rot_bins, N_LAYERS as u8]);
     put(out, 14, &(BELIEF_SIDE as u16).to_le_bytes());
     put(out, 16, &(SIDE_FEATURES as u16).to_le_bytes());
+    put(out, 18, &[instrument.code(), 0]);
     put(out, 20, &(total as u32).to_le_bytes());
     put(out, 24, &belief_input.scale.to_le_bytes());
     put(out, 28, &belief_input.zero_point.to_le_bytes());
