@@ -308,6 +308,7 @@ fn the_mcu_tables_are_the_committed_benchmark_output() {
         "results/mcu-bench/learnt-int8-oracle.md",
         "results/mcu-bench/heuristic-1-confident.md",
         "results/mcu-bench/learnt-int8-confident.md",
+        "results/mcu-bench/learnt-int8-confident-edm.md",
     ] {
         let text = read(file);
         let rows: Vec<&str> = text

@@ -131,6 +131,7 @@ pub const STEPS: &[Step] = &[
     cli("main-job", "results", &["eval", "--agents", "all", "--rot-bins", "1,10", "--plans", "1000", "--with-no-oracle", "--out", "results/", "--no-progress"], 100),
     cli("confident", "results/confident", &["eval", "--agents", "heuristic-1,learnt,learnt-int8,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--curve-plans", "0", "--out", "results/confident"], 100),
     cli("frontier-edm", "results/edm/frontier", &["eval", "--agents", "learnt,heuristic-1", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--instrument", "edm", "--stop-risks", "0.001,0.003,0.01,0.03,0.1", "--curve-plans", "0", "--no-progress", "--out", "results/edm/frontier"], 300),
+    Step { runner: Runner::Example("station_sweep"), stdout_to: Some("results/edm/station-sweep.md"), ..cli("station-sweep-edm", "results/edm", &["--episodes", "10"], 60) },
     cli("frontier", "results/frontier", &["eval", "--agents", "learnt,heuristic-1,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--stop-risks", "0.001,0.003,0.01,0.03,0.1", "--curve-plans", "0", "--no-progress", "--out", "results/frontier"], 430),
     Step { runner: Runner::Example("select_seed"), stdout_to: Some("policies/k1/seeds.md"), ..cli("seeds-k1", "policies/k1", &["1", "policies/k1"], 60) },
     Step { runner: Runner::Example("select_seed"), stdout_to: Some("policies/k10/seeds.md"), ..cli("seeds-k10", "policies/k10", &["10", "policies/k10"], 150) },
@@ -178,6 +179,7 @@ pub const STEPS: &[Step] = &[
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-oracle.md"), ..cli("mcu-bench-int8", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8"], 30) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/heuristic-1-confident.md"), ..cli("mcu-bench-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--termination", "confident"], 160) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-confident.md"), ..cli("mcu-bench-int8-confident", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8", "--termination", "confident"], 40) },
+    Step { runner: Runner::Xtask, stdout_to: Some("results/mcu-bench/learnt-int8-confident-edm.md"), ..cli("mcu-bench-int8-confident-edm", "results/mcu-bench", &["mcu-bench", "--episodes", "20", "--agent", "learnt-int8", "--termination", "confident", "--instrument", "edm"], 40) },
     Step { runner: Runner::Xtask, stdout_to: Some("results/size.md"), ..cli("size", "results", &["size"], 120) },
     Step { runner: Runner::Example("redraw"), ..cli("charts", "results", &["results", "policies"], 5) },
 ];
@@ -585,10 +587,14 @@ fn check_eval_prefixes(ctx: &Ctx) -> Result<Vec<String>> {
             // results/extra and the frontier keep only aggregates, no per-episode records.
             continue;
         }
-        // `--with-no-oracle` writes a second run into no-oracle/: both are compared.
+        // `--with-no-oracle` writes a second run into no-oracle/ and, for the paper's sensor,
+        // the EDM-only instrument's into no-oracle-edm/: all are compared.
         let mut files = vec!["results.json".to_string()];
         if s.args.contains(&"--with-no-oracle") {
             files.push("no-oracle/results.json".into());
+            if !s.args.contains(&"edm") {
+                files.push("no-oracle-edm/results.json".into());
+            }
         }
         let mut committed_texts = Vec::new();
         for f in &files {

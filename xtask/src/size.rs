@@ -125,14 +125,16 @@ pub fn table(elf: &Path) -> Result<(String, Sizes)> {
     {
         use activesense_core::device::POLICY_SLOT_BYTES;
         use activesense_core::policy::{builtin, int8};
-        let blobs = builtin::K1.len() + builtin::K10.len();
+        let blobs: usize = builtin::POLICIES.iter().map(|b| b.len()).sum();
         writeln!(
             out,
-            "of which the learnt policy: flash {} bytes (int8 blobs K = 1: {}, K = 10: {}); \
-             RAM {} bytes (int8 activations {} + upload slot {})",
+            "of which the learnt policies: flash {} bytes (int8 blobs, EDM + scan K = 1: {}, K = 10: {}; \
+             EDM only K = 1: {}, K = 10: {}); RAM {} bytes (int8 activations {} + upload slot {})",
             blobs,
             builtin::K1.len(),
             builtin::K10.len(),
+            builtin::EDM_K1.len(),
+            builtin::EDM_K10.len(),
             int8::SCRATCH_BYTES + POLICY_SLOT_BYTES,
             int8::SCRATCH_BYTES,
             POLICY_SLOT_BYTES

@@ -139,6 +139,10 @@ pub fn agreement(a: AgreementArgs) -> Result<()> {
         reports.push(serde_json::json!({ "policy": p.describe(), "agreement": r }));
     }
     if let Some(path) = &a.json {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)
+                .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", dir.display()))?;
+        }
         write_file(path, &serde_json::to_string_pretty(&reports)?)?;
         println!("wrote {}", path.display());
     }
