@@ -201,8 +201,9 @@ impl EpisodeConfig {
     };
 
     /// This configuration on `instrument`.
-    pub const fn on(self, instrument: InstrumentProfile) -> Self {
-        EpisodeConfig { instrument, ..self }
+    pub const fn on(mut self, instrument: InstrumentProfile) -> Self {
+        self.instrument = instrument;
+        self
     }
 
     /// Rotation step in radians.
