@@ -7,7 +7,7 @@
 
 use crate::baselines::greedy;
 use crate::episode;
-use crate::learn::agent::{default_policy_path_for, Int8Policy, LearntPolicy};
+use crate::learn::agent::{default_policy_path_for, InputMask, Int8Policy, LearntPolicy};
 use crate::learn::file;
 use crate::world::SimWorld;
 use activesense_core::episode::{Action, AgentKind, InstrumentProfile};
@@ -29,9 +29,10 @@ impl Policies {
     }
 
     /// [`Self::load`] for `instrument`: the defaults are its committed policies
-    /// ([`default_policy_path_for`]), and a policy trained for another instrument is
-    /// refused (a scan network on an instrument without a camera would read empty scans it
-    /// never saw; an EDM-only network on the paper's sensor would ignore what it is shown).
+    /// ([`default_policy_path_for`]), and a network that reads the scan is refused on an
+    /// instrument without a camera (it would read empty scans it never saw in training). A
+    /// scan-blind network may play the paper's sensor: it ignores the scan by design (the
+    /// scan ablation).
     pub fn load_for(
         instrument: InstrumentProfile,
         given: &[PathBuf],
@@ -66,7 +67,7 @@ impl Policies {
             let p = LearntPolicy::load(&path, k).map_err(|e| {
                 anyhow::anyhow!("{e} (the learnt agent with --rot-bins {k} needs a policy for K = {k}; train one with `activesense train --rot-bins {k}` or pass --policy FILE)")
             })?;
-            if p.mask.instrument() != Some(instrument) {
+            if !instrument.has_scan() && p.mask != InputMask::NoScans {
                 anyhow::bail!(
                     "'{}' was trained with inputs '{}', a policy for {}, not for --instrument {}: {}",
                     path.display(),
@@ -310,8 +311,10 @@ mod tests {
         std::fs::remove_dir_all(&dir).ok();
     }
 
-    /// The committed policies of each instrument load for it and are refused for the other,
-    /// float and int8 alike, with a message that says which instrument they are for.
+    /// The committed policies of each instrument load for it; a blob is refused for the other
+    /// instrument, and a float network that reads the scan is refused without a camera (a
+    /// scan-blind one may play the paper's sensor: the scan ablation), with a message that
+    /// says which instrument they are for.
     #[test]
     fn a_policy_for_another_instrument_is_refused() {
         for (own, other) in [
@@ -322,13 +325,16 @@ mod tests {
             let mut p = Policies::default();
             assert!(p.load_int8_for(own, &[], &[1, 10]).is_ok());
             let path = default_policy_path_for(own, 10);
-            let e = Policies::load_for(other, &[path], &[10])
-                .unwrap_err()
-                .to_string();
-            assert!(
-                e.contains(&format!("not for --instrument {}", other.name())),
-                "{e}"
-            );
+            let loaded = Policies::load_for(other, &[path], &[10]);
+            if own.has_scan() {
+                let e = loaded.unwrap_err().to_string();
+                assert!(
+                    e.contains(&format!("not for --instrument {}", other.name())),
+                    "{e}"
+                );
+            } else {
+                assert!(loaded.is_ok());
+            }
             let blob = path_of_blob(own, 10);
             let e = Policies::default()
                 .load_int8_for(other, &[blob], &[10])
