@@ -145,7 +145,7 @@ fn ablated_policies_train_and_play_with_their_mask() {
         s(&policy),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // The instrument's int8 form needs every input: an ablation is refused by name.
+    // A scan-blind network is the EDM-only instrument's: its int8 form says so (blob byte 18).
     let o = activesense(&[
         "policy",
         "quantize",
@@ -154,9 +154,41 @@ fn ablated_policies_train_and_play_with_their_mask() {
         "--out",
         s(&dir.join("x.q8")),
     ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("--instrument edm"));
+    assert_eq!(std::fs::read(dir.join("x.q8")).unwrap()[18], 1);
+    // A network denied its belief map is no instrument's: refused by name.
+    let blind = dir.join("no-belief");
+    let o = activesense(&[
+        "train",
+        "--rot-bins",
+        "1",
+        "--updates",
+        "2",
+        "--imitation-updates",
+        "1",
+        "--envs",
+        "2",
+        "--segment",
+        "4",
+        "--inputs",
+        "no-belief",
+        "--no-progress",
+        "--out",
+        s(&blind),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = activesense(&[
+        "policy",
+        "quantize",
+        "--policy",
+        s(&blind.join("policy.policy")),
+        "--out",
+        s(&dir.join("y.q8")),
+    ]);
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(e.contains("no-scans") && e.contains("policy.policy"), "{e}");
+    assert!(e.contains("no-belief") && e.contains("policy.policy"), "{e}");
     let o = activesense(&[
         "train",
         "--rot-bins",
