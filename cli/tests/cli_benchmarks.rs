@@ -188,7 +188,10 @@ fn ablated_policies_train_and_play_with_their_mask() {
     ]);
     assert!(!o.status.success());
     let e = String::from_utf8_lossy(&o.stderr);
-    assert!(e.contains("no-belief") && e.contains("policy.policy"), "{e}");
+    assert!(
+        e.contains("no-belief") && e.contains("policy.policy"),
+        "{e}"
+    );
     let o = activesense(&[
         "train",
         "--rot-bins",
