@@ -726,7 +726,12 @@ mod tests {
 
     /// A session that said hello and holds the square plan (request ids 1 and 2 used).
     fn session_with_rect_4x3() -> Session {
-        let mut s = Session::new(CFG);
+        session_with_rect_4x3_on(CFG)
+    }
+
+    /// [`session_with_rect_4x3`] with the session configuration `cfg`.
+    fn session_with_rect_4x3_on(cfg: SessionConfig) -> Session {
+        let mut s = Session::new(cfg);
         call(
             &mut s,
             1,
@@ -776,24 +781,10 @@ mod tests {
     fn a_blob_serves_only_its_instrument() {
         use crate::episode::InstrumentProfile;
         static ONLY_SCAN: [&[u8]; 1] = [crate::policy::builtin::K10];
-        let mut s = Session::new(SessionConfig {
+        let mut s = session_with_rect_4x3_on(SessionConfig {
             policies: &ONLY_SCAN,
             ..CFG
         });
-        call(
-            &mut s,
-            1,
-            &Request::Hello {
-                protocol: PROTOCOL_VERSION,
-            },
-        );
-        call(
-            &mut s,
-            2,
-            &Request::LoadPlan {
-                vertices: rect_4x3_wire(),
-            },
-        );
         let mut p = params(5);
         p.agent = AgentKind::LearntInt8;
         p.config.instrument = InstrumentProfile::Edm;

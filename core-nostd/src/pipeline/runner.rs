@@ -211,6 +211,20 @@ mod tests {
     use crate::pipeline::Termination;
     use crate::policy::BaselineAgent;
 
+    /// A heuristic-1 episode with K = 10, no truth, run to the action limit of `config`.
+    fn action_limit_params(config: EpisodeConfig) -> EpisodeParams {
+        EpisodeParams {
+            agent: AgentKind::Heuristic1,
+            seed: 1,
+            rot_bins: 10,
+            known_heading: None,
+            ground_truth: None,
+            initial_scan: 0,
+            termination: Termination::ActionLimit,
+            config,
+        }
+    }
+
     /// A policy that only ever rotates still measures once every whole turn: the runner
     /// overrides the rotation after `stall_limit` rotations in a row, and only then.
     #[test]
@@ -223,20 +237,11 @@ mod tests {
         }
         let plan = crate::fixtures::centred_rect(6.0, 4.0);
         let mut r = EpisodeRunner::new_empty();
-        let params = EpisodeParams {
-            agent: AgentKind::Heuristic1,
-            seed: 1,
-            rot_bins: 10,
-            known_heading: None,
-            ground_truth: None,
-            initial_scan: 0,
-            termination: Termination::ActionLimit,
-            config: EpisodeConfig {
-                steps_per_turn: 12,
-                max_actions: 60,
-                ..EpisodeConfig::DEFAULT
-            },
-        };
+        let params = action_limit_params(EpisodeConfig {
+            steps_per_turn: 12,
+            max_actions: 60,
+            ..EpisodeConfig::DEFAULT
+        });
         r.start(&plan, &params).unwrap();
         assert_eq!(r.stall_limit(), 12);
         let mut taken = [Action::RotateRight; 60];
@@ -265,20 +270,11 @@ mod tests {
     fn rejects_bad_answers_and_keeps_state() {
         let plan = crate::fixtures::centred_rect(6.0, 4.0);
         let mut r = EpisodeRunner::new_empty();
-        let params = EpisodeParams {
-            agent: AgentKind::Heuristic1,
-            seed: 1,
-            rot_bins: 10,
-            known_heading: None,
-            ground_truth: None,
-            initial_scan: 0,
-            termination: Termination::ActionLimit,
-            config: EpisodeConfig {
-                min_observability: 0.0,
-                stop_risk: crate::limits::DEFAULT_STOP_RISK,
-                ..EpisodeConfig::DEFAULT
-            },
-        };
+        let params = action_limit_params(EpisodeConfig {
+            min_observability: 0.0,
+            stop_risk: crate::limits::DEFAULT_STOP_RISK,
+            ..EpisodeConfig::DEFAULT
+        });
         r.start(&plan, &params).unwrap();
         let mut agent = BaselineAgent::new(AgentKind::Heuristic1, 1);
         assert_eq!(r.decide(&mut agent), Some(Action::Measure));
