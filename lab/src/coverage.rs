@@ -31,6 +31,8 @@ pub struct CoverageRun {
     pub termination: Termination,
     /// The episodes' configuration (action limit, stop risk, ...).
     pub config: EpisodeConfig,
+    /// The room the EDM hits (`--site`).
+    pub site: activesense_instrument::world::site::SiteLevel,
     /// The first episode seed: a room's episodes take this and the next ones.
     pub episode_seed: u64,
     /// A heading hint derived from each episode's truth (`truth + offset ± tol`), to
@@ -220,6 +222,7 @@ fn spec_of(run: &CoverageRun, seed: u32, room: Option<&NamedPlan>, episode: u64)
     spec.rot_bins = run.rot_bins;
     spec.termination = run.termination;
     spec.config = run.config;
+    spec.sensor.site = run.site;
     spec.episode_seed = run.episode_seed.wrapping_add(episode);
     spec.user_plan = room.cloned();
     spec

@@ -87,6 +87,7 @@ pub fn run(a: AnswerCoverageArgs) -> Result<()> {
             agent: a.agent,
             termination: a.episode.termination,
             config: a.episode.config(),
+            site: a.episode.site,
             episode_seed: a.episode.episode_seed,
             hint: a.hint_offset_tol,
         });

@@ -126,6 +126,7 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
         first_seed: a.first_seed,
         episode_seed: a.episode.episode_seed,
         config: a.episode.config(),
+        site: a.episode.site,
         agent_table_plans: a.agent_table_plans,
         ridge: a.ridge,
         rust_out: a.rust_out.unwrap_or_else(|| match instrument {

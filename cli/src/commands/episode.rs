@@ -90,7 +90,7 @@ fn spec_of(a: &EpisodeArgs) -> Result<EpisodeSpec> {
         agent: a.agent,
         rot_bins,
         config: a.episode.config(),
-        sensor: a.sensor.model()?,
+        sensor: a.episode.sensor(a.sensor.model()?),
         termination: a.episode.termination,
     })
 }

@@ -128,7 +128,7 @@ pub fn run(a: EvalArgs) -> Result<()> {
         first_seed: a.first_seed,
         episode_seed: a.episode.episode_seed,
         config: a.episode.config(),
-        sensor: a.sensor.model()?,
+        sensor: a.episode.sensor(a.sensor.model()?),
         termination: a.episode.termination,
         policy_files: Vec::new(),
         policies: Policies::default(),

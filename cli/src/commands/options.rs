@@ -13,6 +13,7 @@ use activesense_core::episode::{
 use activesense_core::limits::DEFAULT_STOP_RISK;
 use activesense_core::registration::pose_distance::Tolerance;
 use activesense_instrument::world::sensor::SensorModel;
+use activesense_instrument::world::site::SiteLevel;
 use anyhow::{bail, Result};
 use clap::Args;
 
@@ -107,6 +108,13 @@ pub struct EpisodeOptions {
     /// instrument applies the same threshold; docs/EVALUATION.md, "Observability").
     #[arg(long, default_value_t = 0.0, value_parser = parse_observability, allow_negative_numbers = true)]
     pub min_observability: f32,
+    /// The room the EDM hits, while the instrument is given the plan: `plan` (the room is
+    /// exactly its plan), `furnished` (furniture against walls, a column, an open door),
+    /// `site` (furnished, plus a wall a few cm off its line, obstacles, glass, people in the
+    /// beam) or `mixed` (one of the three per episode, from its seed). Seeded like the
+    /// episode (docs/WORLD.md, "Sites").
+    #[arg(long, default_value = "plan", value_parser = SiteLevel::parse)]
+    pub site: SiteLevel,
 }
 
 /// One option of [`EpisodeOptions`], named as on the command line, for
@@ -159,6 +167,14 @@ impl EpisodeOptions {
             stop_risk: self.stop_risk,
             instrument: self.instrument.instrument,
             ..Default::default()
+        }
+    }
+
+    /// `sensor` in the room these options name (`--site`).
+    pub fn sensor(&self, sensor: SensorModel) -> SensorModel {
+        SensorModel {
+            site: self.site,
+            ..sensor
         }
     }
 
@@ -237,6 +253,7 @@ impl SensorArgs {
             max_incidence: self.max_incidence_deg.to_radians(),
             scan_false_negative: self.scan_fn,
             scan_false_positive: self.scan_fp,
+            site: SiteLevel::Plan,
         };
         m.validate().map_err(anyhow::Error::msg)?;
         Ok(m)

@@ -168,6 +168,7 @@ pub(super) fn spec_for(
     spec.rot_bins = rot_bins;
     spec.config = o.config();
     spec.termination = o.termination;
+    spec.sensor = o.sensor(spec.sensor);
     Ok(spec)
 }
 

@@ -247,10 +247,14 @@ impl StationReport {
         tie_break: Option<u8>,
         risk: Option<f64>,
         max_risk: f32,
+        mismatch: Option<&str>,
     ) -> Result<[f64; 4]> {
         let cands = self.candidates();
         if cands.is_empty() {
             bail!("no answer: nothing written to the instrument");
+        }
+        if let Some(m) = mismatch {
+            bail!("{m}; nothing written: check the room against the plan (furniture, doors, walls off their lines), or measure from another set-up");
         }
         let k = match (self.symmetry_order > 1, tie_break) {
             (false, _) => 0,
@@ -350,6 +354,9 @@ pub fn setup_of(a: &StationArgs) -> Result<(String, SessionSetup, Policies)> {
     }
     a.episode
         .require_termination("station", &[Termination::Confident])?;
+    if !a.episode.site.is_plan() {
+        bail!("`station` does not take --site: the room is whatever the instrument stands in; give --site to `geocom-sim` to simulate a furnished one");
+    }
     let mut spec = EpisodeSpec::new(named.seed(), a.agent);
     spec.episode_seed = a.episode.episode_seed;
     let config = a.episode.config();
@@ -437,6 +444,7 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
             a.tie_break,
             answer.risk,
             a.episode.stop_risk,
+            answer.mismatch.as_deref(),
         ))
     } else {
         None
@@ -530,7 +538,7 @@ pub fn sim_of(a: &GeocomSimArgs) -> Result<(String, GeoComSim)> {
     spec.episode_seed = a.episode.episode_seed;
     let cfg = SimConfig {
         plan: named.plan.clone(),
-        sensor: a.sensor.model()?,
+        sensor: a.episode.sensor(a.sensor.model()?),
         config: a.episode.config(),
         world_seed: spec.world_seed(),
         motor_speed: a.motor_deg_per_s.max(0.0).to_radians(),

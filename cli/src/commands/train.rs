@@ -68,6 +68,8 @@ pub fn run(a: TrainArgs) -> Result<()> {
     let mut hp = a.hp;
     hp.rot_bins = a.episode.one_rot_bins(1)?;
     hp.termination = a.episode.termination;
+    hp.instrument = a.episode.instrument.instrument;
+    hp.site = a.episode.site;
     hp.max_actions = a.episode.max_actions;
     let init = match &a.init {
         Some(p) => Some(file::load_expecting(p, hp.rot_bins, shape_for(hp.rot_bins).side)?.0),

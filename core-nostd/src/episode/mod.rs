@@ -143,7 +143,8 @@ impl InstrumentProfile {
         matches!(self, InstrumentProfile::EdmScan)
     }
 
-    fn is_edm_scan(&self) -> bool {
+    /// The paper's sensor (left out of JSON, the default).
+    pub fn is_edm_scan(&self) -> bool {
         *self == InstrumentProfile::EdmScan
     }
 }

@@ -124,7 +124,43 @@ pub struct Reading {
     pub bearing_deg: f64,
     /// Range (file units).
     pub range: f64,
+    /// The range the plan predicts along this bearing from the answer (file units); `None`
+    /// when there is no answer or the beam meets no wall of the plan.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expected: Option<f64>,
+    /// How the reading compares with the plan at the answer.
+    #[serde(default)]
+    pub fit: ReadingFit,
+    /// The plan's wall the beam meets at the answer (1-based, as `plan show` numbers them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall: Option<usize>,
 }
+
+/// How one reading compares with the range the plan predicts at the answer: the beam model
+/// of *Probabilistic Robotics* §6.3 in words. A short reading is something in front of the
+/// wall the plan does not draw (furniture, a column, a person); a long one reads through the
+/// wall (an open door, glass) — or says the answer is wrong.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReadingFit {
+    /// Within the fit's gate of the predicted range.
+    #[default]
+    Explained,
+    /// Shorter than the plan predicts: something stands in front of the wall.
+    Short,
+    /// Longer than the plan predicts: through the wall, or a wrong answer.
+    Long,
+    /// The plan predicts no wall along this bearing from the answer.
+    NoWall,
+}
+
+/// Share of readings that, once not explained by the plan at the answer, makes the answer
+/// say the room does not match its plan (with at least [`MISMATCH_MIN_READINGS`]).
+pub const MISMATCH_SHARE: f64 = 0.25;
+
+/// Fewest unexplained readings that make the answer say the room does not match its plan
+/// (one stray return is the EDM's outlier rate at work, not a room unlike its plan).
+pub const MISMATCH_MIN_READINGS: usize = 2;
 
 /// The answer checked against the simulated truth (simulation only).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -206,6 +242,10 @@ pub struct Answer {
     pub heading_hint: Option<HeadingHint>,
     /// The answer against the truth (simulation only).
     pub truth: Option<TruthCheck>,
+    /// When the readings say the room does not match its plan, that, in words (how many
+    /// readings hit something not on the plan, near which walls).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mismatch: Option<String>,
 }
 
 /// What an [`Answer`] is built from.
@@ -238,6 +278,95 @@ pub struct AnswerInput<'a> {
     pub range_sigma: f32,
 }
 
+/// Compares every reading with the range the plan predicts from `pose` ([`ReadingFit`]) and,
+/// when too many are not explained ([`MISMATCH_SHARE`], [`MISMATCH_MIN_READINGS`]), says in
+/// words that the room does not match its plan.
+fn compare_with_plan(
+    a: &mut Answer,
+    plan: &FloorPlan,
+    pose: &Pose2,
+    readings: &[Measurement],
+    frame: &PlanFrame,
+) {
+    use activesense_core::world::geometry::unit;
+    for (r, m) in a.readings.iter_mut().zip(readings) {
+        let hit = plan.ray_cast(pose.translation(), unit(pose.theta + m.bearing));
+        let Some(hit) = hit else {
+            r.fit = ReadingFit::NoWall;
+            continue;
+        };
+        r.expected = Some(frame.length_to_plan(hit.range as f64));
+        r.wall = Some(hit.wall + 1);
+        let residual = m.range - hit.range;
+        r.fit = if residual.abs() <= PRECISION_GATE {
+            ReadingFit::Explained
+        } else if residual < 0.0 {
+            ReadingFit::Short
+        } else {
+            ReadingFit::Long
+        };
+    }
+    let off: Vec<&Reading> = a
+        .readings
+        .iter()
+        .filter(|r| r.fit != ReadingFit::Explained)
+        .collect();
+    if off.len() < MISMATCH_MIN_READINGS
+        || (off.len() as f64) < MISMATCH_SHARE * a.readings.len() as f64
+    {
+        return;
+    }
+    let walls = |fit: ReadingFit| {
+        let mut w: Vec<usize> = off
+            .iter()
+            .filter(|r| r.fit == fit)
+            .filter_map(|r| r.wall)
+            .collect();
+        w.sort_unstable();
+        w.dedup();
+        w
+    };
+    let named = |w: &[usize]| match w {
+        [] => String::new(),
+        [one] => format!(" near wall {one}"),
+        _ => format!(
+            " near walls {}",
+            w.iter()
+                .map(|w| w.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
+    let count = |fit: ReadingFit| off.iter().filter(|r| r.fit == fit).count();
+    let mut parts = Vec::new();
+    if count(ReadingFit::Short) > 0 {
+        parts.push(format!(
+            "{} hit something in front of the plan's walls{}",
+            count(ReadingFit::Short),
+            named(&walls(ReadingFit::Short))
+        ));
+    }
+    if count(ReadingFit::Long) > 0 {
+        parts.push(format!(
+            "{} read beyond the plan's walls{} (an open door, glass, or a wrong answer)",
+            count(ReadingFit::Long),
+            named(&walls(ReadingFit::Long))
+        ));
+    }
+    if count(ReadingFit::NoWall) > 0 {
+        parts.push(format!(
+            "{} point where the plan has no wall",
+            count(ReadingFit::NoWall)
+        ));
+    }
+    a.mismatch = Some(format!(
+        "the room does not match its plan: {} of {} readings are not on the plan ({})",
+        off.len(),
+        a.readings.len(),
+        parts.join("; ")
+    ));
+}
+
 /// Degrees in (−180, 180].
 fn deg(rad: f64) -> f64 {
     let d = rad.to_degrees() % 360.0;
@@ -266,6 +395,9 @@ impl Answer {
             .map(|m| Reading {
                 bearing_deg: (m.bearing as f64).to_degrees(),
                 range: frame.length_to_plan(m.range as f64),
+                expected: None,
+                fit: ReadingFit::Explained,
+                wall: None,
             })
             .collect();
         let coordinates = if frame.bbox_centre == [0.0; 2] && frame.centroid == [0.0; 2] {
@@ -306,10 +438,12 @@ impl Answer {
             ambiguity: None,
             heading_hint: i.hint,
             truth: None,
+            mismatch: None,
         };
         let Some(pose) = i.pose else {
             return a;
         };
+        compare_with_plan(&mut a, i.plan, &pose, i.readings, frame);
         // Precision from the information matrix of the readings the pose explains.
         let obs = Observations::from_slice(i.readings).ok();
         let cov = obs.as_ref().map(|o| {
@@ -651,6 +785,55 @@ mod tests {
             hint: None,
             range_sigma: 0.01,
         }
+    }
+
+    /// Readings the plan explains stay quiet; a room whose readings hit things the plan does
+    /// not draw says so, with the bearing, the measured and the expected range, and the walls.
+    #[test]
+    fn a_room_unlike_its_plan_is_said_in_words() {
+        let plan = rect();
+        let frame = PlanFrame::default();
+        let pose = Pose2::new(1.0, 0.5, 0.3);
+        let bearings = [0.0, 0.9, 1.7, 2.6, 3.4, 4.3, 5.1, 5.8];
+        let clean = readings(&plan, &pose, &bearings);
+        let a = Answer::new(&input(&plan, &frame, pose, &clean, false));
+        assert!(a.readings.iter().all(|r| r.fit == ReadingFit::Explained));
+        assert_eq!(a.mismatch, None);
+        assert!(!a.to_text().contains("does not match"));
+        // One stray reading is the EDM's outlier rate at work, not a room unlike its plan.
+        let mut one = clean.clone();
+        one[2] = Measurement::new(one[2].bearing, one[2].range - 0.6);
+        let a = Answer::new(&input(&plan, &frame, pose, &one, false));
+        assert_eq!(a.readings[2].fit, ReadingFit::Short);
+        assert_eq!(a.mismatch, None);
+        assert!(a
+            .to_text()
+            .contains("short: something in front of the wall"));
+        // Cabinets in front of two walls and a door: the room is not its plan.
+        let mut cluttered = one;
+        cluttered[4] = Measurement::new(cluttered[4].bearing, cluttered[4].range - 0.5);
+        cluttered[6] = Measurement::new(cluttered[6].bearing, cluttered[6].range + 2.0);
+        let a = Answer::new(&input(&plan, &frame, pose, &cluttered, false));
+        let words = a
+            .mismatch
+            .clone()
+            .expect("three of eight readings off the plan");
+        assert!(
+            words.starts_with("the room does not match its plan: 3 of 8 readings are not on the plan (2 hit something in front of the plan's walls near walls"),
+            "{words}"
+        );
+        assert!(
+            words.contains("1 read beyond the plan's walls near wall"),
+            "{words}"
+        );
+        let text = a.to_text();
+        assert!(text.contains("ROOM DOES NOT MATCH THE PLAN"), "{text}");
+        let expected = a.readings[6].expected.unwrap();
+        assert!((a.readings[6].range - expected - 2.0).abs() < 1e-3);
+        assert!(
+            text.contains(&format!("{:.3} m expected", expected)),
+            "{text}"
+        );
     }
 
     #[test]

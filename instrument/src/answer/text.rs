@@ -1,6 +1,6 @@
 //! [`Answer::to_text`]: the answer as printed by `episode`, `sim` and `serial run`.
 
-use super::{Answer, Determination};
+use super::{Answer, Determination, ReadingFit};
 use std::fmt::Write;
 
 /// Decimals that show a millimetre in `unit`.
@@ -86,6 +86,33 @@ impl Answer {
                 )
             }
         );
+        let off: Vec<_> = self
+            .readings
+            .iter()
+            .filter(|r| r.fit != ReadingFit::Explained)
+            .collect();
+        if !off.is_empty() {
+            let _ = writeln!(s, "  readings the plan does not explain at the answer:");
+            for r in off {
+                let what = match r.fit {
+                    ReadingFit::Short => "short: something in front of the wall",
+                    ReadingFit::Long => "long: beyond the wall",
+                    _ => "no wall of the plan along it",
+                };
+                let expected = match (r.expected, r.wall) {
+                    (Some(x), Some(w)) => format!("{x:.d$} {u} expected (wall {w})"),
+                    _ => "no range expected".to_string(),
+                };
+                let _ = writeln!(
+                    s,
+                    "    {:.1}°: {:.d$} {u} measured, {expected}; {what}",
+                    r.bearing_deg, r.range
+                );
+            }
+        }
+        if let Some(m) = &self.mismatch {
+            let _ = writeln!(s, "  ROOM DOES NOT MATCH THE PLAN: {m}");
+        }
         let _ = writeln!(
             s,
             "  risk that this answer is wrong: {}",

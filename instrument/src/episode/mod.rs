@@ -262,6 +262,9 @@ pub struct Trajectory {
     /// Present in inspected learnt-agent episodes (then every step has `inspect`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub inspection: Option<InspectionHeader>,
+    /// The room as it stood, when it was not its plan (`--site`; simulation truth).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub site: Option<crate::world::site::Site>,
 }
 
 /// Runs one episode of a Table-3 baseline (`spec.agent`, seeded from the spec) to its
@@ -378,6 +381,7 @@ pub fn run_episode_observed(
         end,
         outcome,
         inspection: None,
+        site: (!world.site().is_plain()).then(|| world.site().clone()),
     }
 }
 

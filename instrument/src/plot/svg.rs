@@ -117,6 +117,10 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
         );
     }
 
+    if let Some(site) = scene.trajectory.and_then(|t| t.site.as_ref()) {
+        draw_site(&mut s, &f, site);
+    }
+
     if let Some(t) = scene.trajectory {
         let a = t.truth.translation();
         for st in t.steps.iter().filter(|st| st.range.is_some()) {
@@ -126,6 +130,7 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
             let (x1, y1) = f.px(end);
             let colour = match st.range_kind {
                 Some(RangeKind::Outlier) => "#e76f51",
+                Some(RangeKind::Clutter) | Some(RangeKind::Behind) => SITE_COLOUR,
                 _ => "#e9c46a",
             };
             let _ = writeln!(
@@ -214,6 +219,12 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
         ("#e9c46a", "— measurement"),
         ("#e76f51", "— outlier"),
     ];
+    let site_item = [(SITE_COLOUR, "■ site, not on the plan; — reading off it")];
+    let drawn_site = scene.trajectory.is_some_and(|t| t.site.is_some());
+    let items: Vec<(&str, &str)> = items
+        .into_iter()
+        .chain(site_item.into_iter().filter(|_| drawn_site))
+        .collect();
     for (i, (c, t)) in items.iter().enumerate() {
         let x = lx + (i % 3) as f32 * 250.0;
         let y = by - 4.0 + (i / 3) as f32 * 18.0;
@@ -225,6 +236,51 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
     }
     s.push_str("</svg>\n");
     s
+}
+
+/// Colour of what the site has and the plan does not (furniture, columns, obstacles, doors,
+/// glass, a wall as built) and of the readings off it.
+const SITE_COLOUR: &str = "#8338ec";
+
+/// Draws the site over the plan: obstacles filled, openings and a moved wall as lines.
+fn draw_site(s: &mut String, f: &Frame, site: &crate::world::site::Site) {
+    for o in &site.obstacles {
+        let pts: Vec<String> = o
+            .corners
+            .iter()
+            .map(|c| {
+                let (x, y) = f.px(v2(c[0], c[1]));
+                format!("{x:.1},{y:.1}")
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            r#"<polygon points="{}" fill="{SITE_COLOUR}" fill-opacity="0.25" stroke="{SITE_COLOUR}" stroke-width="1.5"/>"#,
+            pts.join(" ")
+        );
+    }
+    for o in &site.openings {
+        let (a, b) = site.as_built.wall(o.wall);
+        let (x0, y0) = f.px(a + (b - a) * o.from);
+        let (x1, y1) = f.px(a + (b - a) * o.to);
+        let dash = if o.depth_behind.is_some() {
+            ""
+        } else {
+            r#" stroke-dasharray="3 3""#
+        };
+        let _ = writeln!(
+            s,
+            r##"<line x1="{x0:.1}" y1="{y0:.1}" x2="{x1:.1}" y2="{y1:.1}" stroke="#ffffff" stroke-width="5"/><line x1="{x0:.1}" y1="{y0:.1}" x2="{x1:.1}" y2="{y1:.1}" stroke="{SITE_COLOUR}" stroke-width="2"{dash}/>"##
+        );
+    }
+    if let Some((i, _)) = site.moved_wall {
+        let (a, b) = site.as_built.wall(i);
+        let ((x0, y0), (x1, y1)) = (f.px(a), f.px(b));
+        let _ = writeln!(
+            s,
+            r#"<line x1="{x0:.1}" y1="{y0:.1}" x2="{x1:.1}" y2="{y1:.1}" stroke="{SITE_COLOUR}" stroke-width="2" stroke-dasharray="8 3"/>"#
+        );
+    }
 }
 
 /// Where a marker's label goes: 16 px from the marker centre along `dir` (pixels, y down),

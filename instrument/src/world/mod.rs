@@ -15,8 +15,10 @@
 pub mod planfile;
 pub mod plans;
 pub mod sensor;
+pub mod site;
 
 use crate::world::sensor::{RangeKind, SensorModel};
+use crate::world::site::Site;
 use activesense_core::episode::Action;
 use activesense_core::episode::{EpisodeConfig, EpisodeState, Observation};
 use activesense_core::world::geometry::{v2, Vec2};
@@ -61,6 +63,10 @@ pub struct SimWorld {
     sensor: SensorModel,
     state: EpisodeState,
     rng: Pcg32,
+    /// What the EDM hits ([`site`]); the plan itself unless `sensor.site` says otherwise.
+    site: Site,
+    /// The site's own stream (people in the beam), apart from the world's.
+    site_rng: Pcg32,
 }
 
 /// What the world knows about one step that the instrument does not report (for the
@@ -91,7 +97,14 @@ impl SimWorld {
             }
         }
         let h = rng.gen_range(0.0..TAU);
+        let site = if sensor.site.is_plan() {
+            Site::plain(&plan)
+        } else {
+            Site::generate(&plan, a, sensor.site, seed)
+        };
         SimWorld {
+            site,
+            site_rng: Pcg32::seed_from_u64(seed ^ 0x0070_656f_706c_6521),
             plan,
             truth: Pose2::new(a.x, a.y, h),
             placement,
@@ -109,6 +122,11 @@ impl SimWorld {
     /// The model (the room).
     pub fn plan(&self) -> &FloorPlan {
         &self.plan
+    }
+
+    /// The room as it stands (what the EDM hits).
+    pub fn site(&self) -> &Site {
+        &self.site
     }
 
     /// Visual centre and placement radius.
@@ -150,20 +168,16 @@ impl SimWorld {
     /// stream, without moving the encoder (the GeoCOM simulator's telescope can stand
     /// between encoder steps when a client positions it there).
     pub fn measure_along(&mut self, angle: f32) -> (Option<f32>, RangeKind) {
+        let origin = self.position();
         self.sensor
-            .measure(&self.plan, self.position(), angle, &mut self.rng)
+            .measure_in(&self.site, origin, angle, &mut self.rng, &mut self.site_rng)
     }
 
     /// Executes one action on the instrument and returns its observation.
     pub fn act(&mut self, action: Action) -> (Observation, StepTruth) {
         self.state.apply(action);
         let (range, kind) = if action == Action::Measure {
-            let (r, k) = self.sensor.measure(
-                &self.plan,
-                self.position(),
-                self.world_bearing(),
-                &mut self.rng,
-            );
+            let (r, k) = self.measure_along(self.world_bearing());
             (r, Some(k))
         } else {
             (None, None)

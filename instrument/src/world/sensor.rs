@@ -8,6 +8,7 @@
 //! `max_incidence`, in which case there is no return (`None`). Every parameter is recorded
 //! with every result (it is serialised into trajectories and result files).
 
+use crate::world::site::{Site, SiteHit, SiteLevel};
 use activesense_core::episode::{SCAN_FOV, SCAN_PIXELS};
 use activesense_core::world::geometry::{unit, Vec2};
 use activesense_core::FloorPlan;
@@ -30,6 +31,9 @@ pub struct SensorModel {
     pub scan_false_negative: f32,
     /// Probability that an empty scan pixel reads 1.
     pub scan_false_positive: f32,
+    /// How far the room the EDM hits departs from its plan ([`SiteLevel`], `--site`).
+    #[serde(default, skip_serializing_if = "SiteLevel::is_plan")]
+    pub site: SiteLevel,
 }
 
 impl Default for SensorModel {
@@ -41,6 +45,7 @@ impl Default for SensorModel {
             max_incidence: 75f32.to_radians(),
             scan_false_negative: 0.0,
             scan_false_positive: 0.0,
+            site: SiteLevel::Plan,
         }
     }
 }
@@ -54,8 +59,13 @@ pub enum RangeKind {
     Hit,
     /// A uniform random outlier.
     Outlier,
-    /// Beyond maximum range or incidence, or the ray escaped.
+    /// Beyond maximum range or incidence, or the ray escaped (or met glass).
     NoReturn,
+    /// Something the plan does not draw, in front of the wall: furniture, a column, an
+    /// obstacle, a person ([`Site`]).
+    Clutter,
+    /// Through an open door, from the space behind the wall ([`Site`]).
+    Behind,
 }
 
 impl SensorModel {
@@ -112,6 +122,41 @@ impl SensorModel {
                 (Some((hit.range + noise).max(0.0)), RangeKind::Hit)
             }
             _ => (None, RangeKind::NoReturn),
+        }
+    }
+
+    /// One EDM reading on the site (what the beam meets as built, [`Site::cast`]). The
+    /// world's stream `rng` makes the same three draws as [`SensorModel::measure`], so a
+    /// plain site reads exactly what the plan reads; the site's own stream decides people.
+    pub fn measure_in<R: Rng>(
+        &self,
+        site: &Site,
+        origin: Vec2,
+        angle: f32,
+        rng: &mut R,
+        site_rng: &mut R,
+    ) -> (Option<f32>, RangeKind) {
+        let outlier = rng.gen_bool(self.outlier_prob as f64);
+        let u: f32 = rng.gen_range(0.0..1.0);
+        let noise = self.sigma * standard_normal(rng);
+        if outlier {
+            return (Some(u * self.max_range), RangeKind::Outlier);
+        }
+        let person = if site.people > 0.0 {
+            (site_rng.gen_range(0.0..1.0), site_rng.gen_range(0.0..1.0))
+        } else {
+            (1.0, 0.0)
+        };
+        let (range, incidence, kind) = match site.cast(origin, unit(angle), person) {
+            SiteHit::Wall { range, incidence } => (range, incidence, RangeKind::Hit),
+            SiteHit::Clutter { range, incidence } => (range, incidence, RangeKind::Clutter),
+            SiteHit::Behind { range, incidence } => (range, incidence, RangeKind::Behind),
+            SiteHit::Nothing => return (None, RangeKind::NoReturn),
+        };
+        if range <= self.max_range && incidence <= self.max_incidence {
+            (Some((range + noise).max(0.0)), kind)
+        } else {
+            (None, RangeKind::NoReturn)
         }
     }
 

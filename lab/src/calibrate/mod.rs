@@ -16,7 +16,9 @@
 
 mod logistic;
 
-pub use logistic::fit_logistic;
+pub use activesense_instrument::world::sensor::SensorModel;
+use activesense_instrument::world::site::SiteLevel;
+use logistic::fit_logistic;
 
 use crate::eval::harness::{episode_bar, EvalOptions};
 use crate::eval::stats::wilson_at;
@@ -52,6 +54,9 @@ pub struct CalibrateOptions {
     pub episode_seed: u64,
     /// The calibration episodes' configuration (they run to its action limit).
     pub config: EpisodeConfig,
+    /// The room the EDM hits in the calibration episodes (`--site`; `mixed` calibrates on
+    /// randomised sites).
+    pub site: SiteLevel,
     /// Calibration plans per setting for the agents of `table_agents`.
     pub agent_table_plans: u32,
     /// Ridge (L2) penalty on the weights.
@@ -537,7 +542,10 @@ pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
         first_seed: a.first_seed,
         episode_seed: a.episode_seed,
         config: a.config,
-        sensor: Default::default(),
+        sensor: SensorModel {
+            site: a.site,
+            ..Default::default()
+        },
         termination: Termination::ActionLimit,
         policy_files: Vec::new(),
         policies,

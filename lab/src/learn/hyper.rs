@@ -6,8 +6,9 @@
 //! the code and the CLI cannot disagree. A run prints the set ([`HyperParams::table`]) and
 //! stores it in the policy file's metadata (`hyper_params`).
 
-use activesense_core::episode::{AgentKind, Termination};
+use activesense_core::episode::{AgentKind, InstrumentProfile, Termination};
 use activesense_instrument::learn::agent::InputMask;
+use activesense_instrument::world::site::SiteLevel;
 use clap::{Args, FromArgMatches};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -94,6 +95,16 @@ pub struct HyperParams {
     #[arg(skip = Termination::Oracle)]
     #[serde(default = "oracle")]
     pub termination: Termination,
+    /// The instrument the training episodes are played on: its stop's tables end a
+    /// `confident` episode. Set from the command's episode options (`--instrument`).
+    #[arg(skip = InstrumentProfile::EdmScan)]
+    #[serde(default, skip_serializing_if = "InstrumentProfile::is_edm_scan")]
+    pub instrument: InstrumentProfile,
+    /// The room the EDM hits in the training episodes (`--site`; `mixed` randomises it per
+    /// episode). Set from the command's episode options.
+    #[arg(skip = SiteLevel::Plan)]
+    #[serde(default, skip_serializing_if = "SiteLevel::is_plan")]
+    pub site: SiteLevel,
     /// Reward: −this for a wrong answer under `--termination confident` (W of the
     /// right/wrong reward; the oracle stop never answers wrongly).
     #[arg(long, default_value_t = default_wrong_penalty())]
@@ -250,6 +261,8 @@ mod tests {
             registration_reward: 1.0,
             registration_penalty: 0.0,
             termination: Termination::Oracle,
+            instrument: InstrumentProfile::EdmScan,
+            site: SiteLevel::Plan,
             wrong_penalty: 2.0,
             gamma: 0.99,
             gae_lambda: 0.95,

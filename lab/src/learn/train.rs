@@ -161,6 +161,8 @@ impl Env {
         spec.episode_seed = rng.gen();
         spec.rot_bins = hp.rot_bins;
         spec.config.max_actions = hp.max_actions;
+        spec.config.instrument = hp.instrument;
+        spec.sensor.site = hp.site;
         spec.termination = hp.termination;
         spec
     }
