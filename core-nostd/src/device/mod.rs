@@ -31,6 +31,7 @@
 
 pub mod controller;
 pub mod instrument;
+pub mod laser;
 pub mod session;
 
 pub use controller::*;
