@@ -7,7 +7,7 @@
 //! Frames are encoded by [`defmt::Encoder`] (rzCOBS) into a small buffer that is written
 //! with one semihosting call per frame (or per 128 bytes).
 //!
-//! On hardware build with `--no-default-features --features log-rtt` instead: the
+//! On hardware (`--features board`, or `--no-default-features --features log-rtt`) the
 //! `defmt-rtt` crate provides the logger.
 
 use core::cell::UnsafeCell;
@@ -73,7 +73,7 @@ impl Out {
 /// # Safety
 /// The caller holds the logger (between `acquire` and `release`).
 #[allow(clippy::mut_from_ref)]
-unsafe fn state() -> &'static mut State {
+unsafe fn state<'a>() -> &'a mut State {
     // SAFETY: exclusive by the caller's contract.
     unsafe { &mut *STATE.0.get() }
 }
