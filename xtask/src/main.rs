@@ -7,6 +7,7 @@
 //! cargo xtask setup        # only the installs: thumbv7em-none-eabihf target, qemu-system-arm, chromium
 //! cargo xtask firmware     # build the firmware ELF (profile `firmware`)
 //! cargo xtask qemu-smoke   # boot the firmware in qemu-system-arm -M netduinoplus2, expect exit 0
+//! cargo xtask flash [--no-run] # build the board firmware (features board + log-rtt) and run it on an STM32F405 with probe-rs
 //! cargo xtask mcu-bench [--episodes N] [--agent NAME] [--termination T] [--instrument P]  # instructions per update / decision / registration (QEMU -icount)
 //! cargo xtask qemu-log     # the firmware's defmt log (smoke boot + one session), decoded
 //! cargo xtask soak [--episodes N]  # N episodes in one QEMU session, each bit-identical to the host
@@ -39,6 +40,7 @@ fn main() {
         Some("ci") => ci(),
         Some("setup") => setup(),
         Some("firmware") => build_firmware().map(|p| println!("{}", p.display())),
+        Some("flash") => flash(&args[1..]),
         Some("qemu-smoke") => qemu_smoke(),
         Some("size") => build_firmware().and_then(|elf| size::report(&elf)),
         Some("fuzz") => fuzz::run(&args[1..]),
@@ -69,6 +71,9 @@ fn print_help() {
          setup       install the thumbv7em-none-eabihf target, qemu-system-arm and chromium if missing\n  \
          firmware    build the firmware ELF and print its path\n  \
          qemu-smoke  boot the firmware under qemu-system-arm -M netduinoplus2 and check its boot line\n  \
+         flash [--no-run]\n              \
+         build the board firmware (Olimex STM32-H405: features board + log-rtt) and flash and\n              \
+         run it with `probe-rs run --chip STM32F405RGTx` (defmt over RTT); --no-run only builds\n  \
          qemu-log    decode the firmware's defmt log (smoke boot and one short session)\n  \
          soak [--episodes N]\n              \
          N consecutive episodes (default 500) in one QEMU session of the firmware, both K,\n              \
@@ -135,8 +140,8 @@ fn have(program: &str) -> bool {
         .unwrap_or(false)
 }
 
-/// Installs what a fresh machine lacks. Idempotent and quiet when all is present.
-fn setup() -> Result<()> {
+/// Installs the thumbv7em-none-eabihf target if rustup lacks it.
+fn setup_target() -> Result<()> {
     let installed = Command::new("rustup")
         .args(["target", "list", "--installed"])
         .output()
@@ -147,6 +152,12 @@ fn setup() -> Result<()> {
     {
         run(Command::new("rustup").args(["target", "add", TARGET]))?;
     }
+    Ok(())
+}
+
+/// Installs what a fresh machine lacks. Idempotent and quiet when all is present.
+fn setup() -> Result<()> {
+    setup_target()?;
     // qemu-system-arm runs the firmware; chromium runs the inspection page's browser test
     // (cli/tests/inspect_browser.rs). Both from the distribution's packages.
     let missing: Vec<&str> = [
@@ -181,6 +192,71 @@ fn setup() -> Result<()> {
     Ok(())
 }
 
+/// Cargo's target directory: `CARGO_TARGET_DIR` if set, else `target/` of the workspace.
+fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(|d| root().join(d))
+        .unwrap_or_else(|| root().join("target"))
+}
+
+/// The chip probe-rs flashes (the Olimex STM32-H405's STM32F405RGT6).
+const PROBE_CHIP: &str = "STM32F405RGTx";
+
+/// The board build: `cargo build -p activesense-firmware --release --target
+/// thumbv7em-none-eabihf --features board` (feature `board` brings `log-rtt`, and takes
+/// precedence over the default `qemu`). Returns the ELF path.
+fn build_board_firmware() -> Result<PathBuf> {
+    run(cargo().args(BOARD_BUILD))?;
+    let elf = target_dir().join(TARGET).join("release").join(FIRMWARE_BIN);
+    if !elf.exists() {
+        bail!("board firmware ELF not found at {}", elf.display());
+    }
+    Ok(elf)
+}
+
+/// `cargo build` arguments of the board firmware (also a CI step).
+const BOARD_BUILD: [&str; 8] = [
+    "build",
+    "-p",
+    "activesense-firmware",
+    "--release",
+    "--target",
+    TARGET,
+    "--features",
+    "board",
+];
+
+/// `cargo xtask flash [--no-run]`: builds the board firmware and runs `probe-rs run --chip
+/// STM32F405RGTx <elf>`, which flashes it over SWD, resets the chip and prints its defmt
+/// log (RTT) until Ctrl-C. docs/firmware.md, "Bring-up", has the steps before this.
+fn flash(args: &[String]) -> Result<()> {
+    let mut no_run = false;
+    for a in args {
+        match a.as_str() {
+            "--no-run" => no_run = true,
+            other => bail!("flash: unknown argument '{other}'"),
+        }
+    }
+    setup_target()?;
+    let elf = build_board_firmware()?;
+    println!("flash: board firmware {}", elf.display());
+    if no_run {
+        return Ok(());
+    }
+    if !have("probe-rs") {
+        bail!(
+            "probe-rs is not installed (it flashes the board over SWD and prints the defmt log).\n\
+             Install it with `cargo install probe-rs-tools --locked` (or see https://probe.rs),\n\
+             connect the debug probe to the board's SWD pins, then run `cargo xtask flash` again.\n\
+             The ELF is built: {}",
+            elf.display()
+        );
+    }
+    run(Command::new("probe-rs")
+        .args(["run", "--chip", PROBE_CHIP])
+        .arg(&elf))
+}
+
 /// Builds the firmware and returns the ELF path.
 fn build_firmware() -> Result<PathBuf> {
     run(cargo().args([
@@ -192,8 +268,7 @@ fn build_firmware() -> Result<PathBuf> {
         "--profile",
         FIRMWARE_PROFILE,
     ]))?;
-    let elf = root()
-        .join("target")
+    let elf = target_dir()
         .join(TARGET)
         .join(FIRMWARE_PROFILE)
         .join(FIRMWARE_BIN);
@@ -384,6 +459,21 @@ fn ci() -> Result<()> {
         "-D",
         "warnings",
     ]))?;
+    // The board build (Olimex STM32-H405: HSE + PLL, the instrument on USART2 and PB0/PB1,
+    // defmt over RTT) must keep compiling and linking, and stay lint-free.
+    run(cargo().args([
+        "clippy",
+        "-p",
+        "activesense-firmware",
+        "--target",
+        TARGET,
+        "--features",
+        "board",
+        "--",
+        "-D",
+        "warnings",
+    ]))?;
+    build_board_firmware()?;
     run(cargo().args(["build", "-p", "activesense-core", "--target", TARGET]))?;
     qemu_smoke()?;
     // The inspection page's browser test must run here, not skip (setup installed chromium).
@@ -441,4 +531,132 @@ fn test_counted(cmd: &mut Command) -> Result<(u64, u64, u64)> {
         bail!("cargo test ran no test");
     }
     Ok((passed, failed, ignored))
+}
+
+/// The board's clock plan (`firmware/src/clock_plan.rs`, the same file the firmware
+/// builds) against RM0090, the STM32F405 reference manual.
+#[cfg(test)]
+#[path = "../../firmware/src/clock_plan.rs"]
+mod clock_plan;
+
+#[cfg(test)]
+mod clock_plan_tests {
+    use super::clock_plan::*;
+
+    /// RM0090 §6.3.2's limits on the main PLL, and the two outputs exactly.
+    fn check_rm0090(hse: u32, p: Pll) {
+        assert!((2..=63).contains(&p.m), "M {p:?}");
+        assert!((50..=432).contains(&p.n), "N {p:?}");
+        assert!([2, 4, 6, 8].contains(&p.p), "P {p:?}");
+        assert!((2..=15).contains(&p.q), "Q {p:?}");
+        assert!(
+            (1_000_000..=2_000_000).contains(&p.vco_in(hse)),
+            "VCO in {p:?}"
+        );
+        assert!(
+            (100_000_000..=432_000_000).contains(&p.vco_out(hse)),
+            "VCO out {p:?}"
+        );
+        // f(VCO clock) = f(PLL clock input) × (PLLN / PLLM); f(PLL general clock output) =
+        // f(VCO clock) / PLLP; f(USB OTG FS, SDIO, RNG clock output) = f(VCO clock) / PLLQ.
+        assert_eq!(
+            hse as u64 * p.n as u64 / p.m as u64 / p.p as u64,
+            168_000_000
+        );
+        assert_eq!(
+            hse as u64 * p.n as u64 / p.m as u64 / p.q as u64,
+            48_000_000
+        );
+    }
+
+    #[test]
+    fn pll_for_an_8_mhz_crystal() {
+        // The Olimex STM32-H405: VCO in 2 MHz (RM0090's recommendation), VCO 336 MHz.
+        let p = pll(8_000_000, 168_000_000);
+        assert_eq!(
+            p,
+            Pll {
+                m: 4,
+                n: 168,
+                p: 2,
+                q: 7
+            }
+        );
+        check_rm0090(8_000_000, p);
+        assert_eq!(BOARD_HSE_HZ, 8_000_000);
+        assert_eq!(BOARD_PLL, p);
+    }
+
+    #[test]
+    fn pll_for_a_12_mhz_crystal() {
+        // E.g. the Adafruit Feather STM32F405's crystal.
+        let p = pll(12_000_000, 168_000_000);
+        assert_eq!(
+            p,
+            Pll {
+                m: 6,
+                n: 168,
+                p: 2,
+                q: 7
+            }
+        );
+        check_rm0090(12_000_000, p);
+    }
+
+    #[test]
+    fn pll_for_other_crystals_meets_rm0090() {
+        for mhz in [4, 16, 24, 25] {
+            check_rm0090(mhz * 1_000_000, pll(mhz * 1_000_000, 168_000_000));
+        }
+        // 25 MHz divides to 2 MHz no better than 48 MHz does: M = 25, VCO in 1 MHz.
+        assert_eq!(
+            pll(25_000_000, 168_000_000),
+            Pll {
+                m: 25,
+                n: 336,
+                p: 2,
+                q: 7
+            }
+        );
+        // A PLL that misses the outputs is caught by the checks above.
+        let r = std::panic::catch_unwind(|| {
+            check_rm0090(
+                8_000_000,
+                Pll {
+                    m: 4,
+                    n: 168,
+                    p: 2,
+                    q: 8,
+                },
+            )
+        });
+        assert!(r.is_err());
+    }
+
+    #[test]
+    fn usart1_divisor_matches_rm0090() {
+        // RM0090's baud-rate table at f(PCLK) = 84 MHz, oversampling by 16: 115.2 KBps
+        // is programmed as USARTDIV 45.5625 (error 0.02 %): mantissa 45 = 0x2D, fraction
+        // 0.5625 × 16 = 9, so USART_BRR = 0x2D9.
+        assert_eq!(PCLK2_HZ, 84_000_000);
+        assert_eq!(HOST_BAUD, 115_200);
+        assert_eq!(HOST_BRR, 0x2D9);
+        assert_eq!(HOST_BRR >> 4, 45);
+        assert_eq!(HOST_BRR & 0xF, 9);
+        // Tx/Rx baud = f(PCK) / (8 × (2 − OVER8) × USARTDIV), OVER8 = 0.
+        let baud = PCLK2_HZ as f64 / (16.0 * (HOST_BRR as f64 / 16.0));
+        assert!((baud / 115_200.0 - 1.0).abs() < 0.0003, "{baud}");
+        assert_eq!(baud_of(PCLK2_HZ, HOST_BRR), 115_226); // +0.02 %, as RM0090 lists
+                                                          // The same rate from the reset clock (HSI 16 MHz, the emulated build): 8.6875.
+        assert_eq!(brr_over16(16_000_000, 115_200), 0x8B);
+    }
+
+    #[test]
+    fn usart2_divisor_is_within_tolerance() {
+        assert_eq!(PCLK1_HZ, 42_000_000);
+        // 42 MHz / (16 × 19200) = 136.72: BRR 2188 = 0x88C (USARTDIV 136.75).
+        assert_eq!(EDM_BRR, brr_over16(42_000_000, EDM_BAUD));
+        let err = (PCLK1_HZ as f64 / EDM_BRR as f64) / EDM_BAUD as f64 - 1.0;
+        assert!(err.abs() < 0.001, "{err}");
+    }
 }
