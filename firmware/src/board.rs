@@ -132,6 +132,7 @@ pub fn check_clocks(rcc: &Rcc) -> bool {
 mod app {
     use super::*;
     use crate::console::{self, say};
+    use crate::Owned;
     use crate::host_link::{self, HostTx, RxQueue, RX_QUEUE};
     use activesense_core::device::instrument::{
         run_local, HardwareInstrument, LocalError, NoScan, StepperConfig,
@@ -158,7 +159,7 @@ mod app {
     #[shared]
     struct Shared {
         /// The episode controller (localizer, policy, registration): a static of `init`.
-        controller: &'static mut Controller,
+        controller: Owned<'static, Controller>,
     }
 
     #[local]

@@ -91,6 +91,11 @@ use stm32f4xx_hal::timer::Timer;
 #[cfg(not(feature = "board"))]
 const QEMU_CORE_HZ: u32 = 168_000_000;
 
+/// An exclusive reference to a static that RTIC's `init` owns (its `local = [...]`
+/// resources): how a big state (the session, the controller) becomes a `#[shared]`
+/// resource without being built on the stack and moved.
+type Owned<'a, T> = &'a mut T;
+
 /// Milliseconds since boot, counted by the SysTick task.
 static MILLIS: AtomicU32 = AtomicU32::new(0);
 

@@ -4,6 +4,7 @@
 #[rtic::app(device = stm32f4xx_hal::pac)]
 mod app {
     use crate::console::{self, say};
+    use crate::Owned;
     use crate::host_link::{self, HostTx, RxQueue, RX_QUEUE};
     use activesense_core::device::{Control, Session, SessionConfig, DEFAULT_TIMEOUT_MS};
     use cortex_m::peripheral::SYST;
@@ -25,7 +26,7 @@ mod app {
     struct Shared {
         /// The whole protocol state (frame buffers, plan, measurement log): a static of
         /// `init` (not on the stack), shared by reference.
-        session: &'static mut Session,
+        session: Owned<'static, Session>,
     }
 
     #[local]
