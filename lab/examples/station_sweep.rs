@@ -7,7 +7,10 @@
 //! what GeoCOM instruments are), calibrated stop at `--stop-risk` (default 1 %), K = 10.
 //! Prints, per agent: right, wrong (of answered), unanswered, measurements, cost.
 //!
-//! `cargo run --release -p activesense-lab --example station_sweep -- [--episodes 10] [--agents learnt-int8,heuristic-1] [--instrument edm] [FILES...]`
+//! `--site furnished|site` plays each room furnished or as a building site (the simulator's
+//! world; the station is given the plan, `docs/WORLD.md`, "Sites").
+//!
+//! `cargo run --release -p activesense-lab --example station_sweep -- [--episodes 10] [--agents learnt-int8,heuristic-1] [--instrument edm] [--site plan] [FILES...]`
 
 use activesense_core::episode::{AgentKind, EpisodeConfig, InstrumentProfile};
 use activesense_core::registration::pose_distance::{PoseDistance, Tolerance};
@@ -16,6 +19,8 @@ use activesense_instrument::agents::Policies;
 use activesense_instrument::episode::EpisodeSpec;
 use activesense_instrument::geocom::instrument::{reference_session, SessionSetup, ROT_BINS};
 use activesense_instrument::world::planfile::{load_rooms, LoadOptions};
+use activesense_instrument::world::sensor::SensorModel;
+use activesense_instrument::world::site::SiteLevel;
 use activesense_instrument::world::SimWorld;
 use std::path::PathBuf;
 
@@ -24,6 +29,7 @@ fn main() -> anyhow::Result<()> {
     let mut agents = vec![AgentKind::LearntInt8, AgentKind::Heuristic1];
     let mut instrument = InstrumentProfile::Edm;
     let mut stop_risk = activesense_core::limits::DEFAULT_STOP_RISK;
+    let mut site = SiteLevel::Plan;
     let mut files: Vec<PathBuf> = Vec::new();
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -34,6 +40,7 @@ fn main() -> anyhow::Result<()> {
         match a.as_str() {
             "--episodes" => episodes = value()?.parse()?,
             "--stop-risk" => stop_risk = value()?.parse()?,
+            "--site" => site = SiteLevel::parse(&value()?).map_err(anyhow::Error::msg)?,
             "--instrument" => {
                 let v = value()?;
                 instrument = InstrumentProfile::from_name(&v)
@@ -76,10 +83,11 @@ fn main() -> anyhow::Result<()> {
     let mut config = EpisodeConfig::default().on(instrument);
     config.stop_risk = stop_risk;
     println!(
-        "{} rooms from {} files, {episodes} setups each, --instrument {}, --stop-risk {stop_risk}, K = {ROT_BINS}\n",
+        "{} rooms from {} files, {episodes} setups each, --instrument {}, --site {}, --stop-risk {stop_risk}, K = {ROT_BINS}\n",
         rooms.len(),
         files.len(),
-        instrument.name()
+        instrument.name(),
+        site.name()
     );
     println!("| agent | setups | right | wrong (of answered) | unanswered | measurements | cost |");
     println!("|---|---|---|---|---|---|---|");
@@ -96,7 +104,10 @@ fn main() -> anyhow::Result<()> {
                     agent,
                     agent_seed: spec.agent_seed(),
                     config,
-                    sensor: Default::default(),
+                    sensor: SensorModel {
+                        site,
+                        ..Default::default()
+                    },
                 };
                 let o = reference_session(&setup, &policies, spec.world_seed())
                     .map_err(|err| anyhow::anyhow!("{label}: {err}"))?;

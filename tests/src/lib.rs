@@ -62,6 +62,14 @@ pub fn edm_only(s: &mut EpisodeSpec) {
     s.termination = Termination::Confident;
 }
 
+/// An `adjust` for [`check_episodes_with`]: [`edm_only`] in a room that is not its plan (a
+/// building site: furniture, a column, obstacles, a wall off its line, people in the beam).
+/// The device only hears readings, so it must decide as the host does on them too.
+pub fn edm_only_on_site(s: &mut EpisodeSpec) {
+    edm_only(s);
+    s.sensor.site = activesense_instrument::world::site::SiteLevel::Site;
+}
+
 /// The host's own episode for `s` (baseline, or the int8 policy built into the firmware).
 pub fn host_episode(s: &EpisodeSpec) -> Trajectory {
     let mut policies = Policies::default();

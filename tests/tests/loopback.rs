@@ -50,6 +50,40 @@ fn loopback_confident_stop_rule_matches_host() {
     l.close().unwrap();
 }
 
+/// On a building site (readings off furniture, columns, people, a wall off its line) the
+/// device still takes the host's actions and stops where the host stops.
+#[test]
+fn loopback_cluttered_site_episodes_match_host() {
+    let mut l = serial::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    l.client.hello().unwrap();
+    for rot_bins in [1, 10] {
+        assert!(
+            check_episodes_with(
+                &mut l.client,
+                4,
+                rot_bins,
+                activesense_tests::edm_only_on_site
+            ) > 0
+        );
+    }
+    l.close().unwrap();
+    // The site is there: some of those readings hit clutter.
+    let cluttered = (0..4)
+        .filter(|&i| {
+            let mut s = spec(i, 10);
+            s.agent = activesense_core::episode::AgentKind::Heuristic1;
+            activesense_tests::edm_only_on_site(&mut s);
+            activesense_instrument::episode::run_episode(&s)
+                .steps
+                .iter()
+                .any(|st| {
+                    st.range_kind == Some(activesense_instrument::world::sensor::RangeKind::Clutter)
+                })
+        })
+        .count();
+    assert!(cluttered > 0, "no reading hit the site's clutter");
+}
+
 /// A confident episode that never gets sure enough to stop (P = 1e-6) answers with its
 /// lowest-risk moment; protocol v5 reports its risk and readings, and the device's answer
 /// equals the host's (checked in [`check_episodes_with`]).

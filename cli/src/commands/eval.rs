@@ -8,6 +8,7 @@ use activesense_core::episode::{AgentKind, InstrumentProfile};
 use activesense_instrument::agents::Policies;
 use activesense_instrument::world::planfile::{self, PlanReadArgs};
 use activesense_instrument::world::plans;
+use activesense_instrument::world::site::SiteLevel;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -73,7 +74,9 @@ pub struct EvalArgs {
     /// Also evaluate the same agents stopping by themselves (`--termination confident`)
     /// and write that run into OUT/no-oracle/: the table an instrument without an oracle
     /// lives by (README, "Without an oracle"); for the paper's sensor also the EDM-only
-    /// instrument's (its policies and stop tables) into OUT/no-oracle-edm/.
+    /// instrument's (its policies and stop tables) into OUT/no-oracle-edm/, and that
+    /// instrument's agents (learnt, learnt-int8, heuristic-1) in furnished rooms and on
+    /// building sites (--site) into OUT/no-oracle-edm-furnished/ and OUT/no-oracle-edm-site/.
     #[arg(long)]
     with_no_oracle: bool,
     /// With --termination confident: run the evaluation once per stop risk (comma-separated,
@@ -247,10 +250,39 @@ pub fn run(a: EvalArgs) -> Result<()> {
             let (report, timing) = harness::run(&edm);
             let files = report::write_outputs(&report, &timing, &dir, &command)?;
             print_summary(&report, &timing, &files);
+            // No room is its plan: the same episodes in furnished rooms and on building
+            // sites (`--site`), for the agents an instrument runs.
+            if edm.sensor.site.is_plan() {
+                for level in [SiteLevel::Furnished, SiteLevel::Site] {
+                    let mut on_site = edm.clone();
+                    on_site.sensor.site = level;
+                    on_site.agents.retain(|k| INSTRUMENT_AGENTS.contains(k));
+                    if on_site.agents.is_empty() {
+                        continue;
+                    }
+                    let dir = a.out.join(format!("no-oracle-edm-{}", level.name()));
+                    eprintln!(
+                        "the EDM-only instrument in {} rooms (--site {}): {} episodes",
+                        level.name(),
+                        level.name(),
+                        on_site.agents.len() * on_site.rot_bins.len() * on_site.plans as usize
+                    );
+                    let (report, timing) = harness::run(&on_site);
+                    let files = report::write_outputs(&report, &timing, &dir, &command)?;
+                    print_summary(&report, &timing, &files);
+                }
+            }
         }
     }
     Ok(())
 }
+
+/// The agents an instrument runs (`station`, `serial run`): the site-level tables are theirs.
+const INSTRUMENT_AGENTS: [AgentKind; 3] = [
+    AgentKind::Learnt,
+    AgentKind::LearntInt8,
+    AgentKind::Heuristic1,
+];
 
 /// Writes an analysis run's files (`frontier.*`, `extra.*`) into `out`, then prints its
 /// markdown and the wall time since `t0`.
