@@ -132,8 +132,8 @@ pub fn check_clocks(rcc: &Rcc) -> bool {
 mod app {
     use super::*;
     use crate::console::{self, say};
-    use crate::Owned;
     use crate::host_link::{self, HostTx, RxQueue, RX_QUEUE};
+    use crate::Owned;
     use activesense_core::device::instrument::{
         run_local, HardwareInstrument, LocalError, NoScan, StepperConfig,
     };

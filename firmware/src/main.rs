@@ -4,8 +4,9 @@
 //! a baseline agent) and prints `activesense-firmware <ver>: core initialised ...` over
 //! semihosting.
 //!
-//! **Modes** (semihosting command line, i.e. QEMU `-semihosting-config ...,arg=smoke` or
-//! `-append smoke`):
+//! **Modes** of the emulated build (semihosting command line, i.e. QEMU
+//! `-semihosting-config ...,arg=smoke` or `-append smoke`; the `board` build runs the
+//! instrument instead, see [`board`]):
 //! * `smoke`: exit with status 0 right after the boot line (`cargo xtask qemu-smoke`).
 //! * `dsp-selftest`: run [`activesense_core::policy::int8::selftest`] (the int8 network's
 //!   DSP `asm!` kernels against the portable and the reference kernels, on random tensors
@@ -23,16 +24,19 @@
 //!   The firmware owns the decisions; in simulation the host answers its action requests.
 //!
 //! **Logging.** Readable status lines (boot, serving, shutdown, panic) are plain text on
-//! semihosting stdout (`hprintln!`), which the tests read. Everything else is logged with
+//! semihosting stdout (`hprintln!`, [`console`]), which the tests read; on hardware they
+//! go to defmt. Everything else is logged with
 //! `defmt` (boot, session opened, plan loaded, episode start and end with counts, rejected
 //! requests, timeouts): feature `log-semihosting` (default, QEMU) writes the defmt frames
 //! to semihosting stderr ([`log`]); `cargo xtask qemu-log` decodes them. Feature `log-rtt`
-//! (`--no-default-features --features log-rtt`) uses `defmt-rtt` on hardware.
+//! (brought by `board`, or `--no-default-features --features log-rtt`) uses `defmt-rtt`
+//! on hardware.
 //!
 //! A panic prints `PANIC: ...` over semihosting and exits with a failure status, so a test
-//! harness sees the failure instead of a hung emulator.
+//! harness sees the failure instead of a hung emulator (on hardware: over defmt, then the
+//! core sleeps).
 //!
-//! **Clocks.** stm32f4xx-hal owns the clock tree (docs/firmware.md, "Clocks"). The
+//! **Clocks.** stm32f4xx-hal owns the clock tree (docs/firmware.md, "Features, clocks and why QEMU keeps the HSI"). The
 //! `board` build runs the HSE (8 MHz on the Olimex STM32-H405) through the PLL to 168 MHz
 //! SYSCLK, 48 MHz USB clock, APB1 42 MHz, APB2 84 MHz ([`clock_plan`]). The emulated build
 //! (feature `qemu`, the default) keeps the reset clocks (HSI, no PLL): QEMU 7.2's

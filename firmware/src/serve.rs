@@ -4,8 +4,8 @@
 #[rtic::app(device = stm32f4xx_hal::pac)]
 mod app {
     use crate::console::{self, say};
-    use crate::Owned;
     use crate::host_link::{self, HostTx, RxQueue, RX_QUEUE};
+    use crate::Owned;
     use activesense_core::device::{Control, Session, SessionConfig, DEFAULT_TIMEOUT_MS};
     use cortex_m::peripheral::SYST;
     use heapless::spsc::{Consumer, Producer};
