@@ -132,7 +132,7 @@ pub fn check_clocks(rcc: &Rcc) -> bool {
 mod app {
     use super::*;
     use crate::console::{self, say};
-    use crate::host_link::{self, HostTx, RxQueue, RX_QUEUE};
+    use crate::usart::{self, HostTx, RxQueue, RX_QUEUE};
     use crate::Owned;
     use activesense_core::device::instrument::{
         run_local, HardwareInstrument, LocalError, NoScan, StepperConfig,
@@ -246,7 +246,7 @@ mod app {
     /// Interrupt-driven receive into the queue.
     #[task(binds = USART1, local = [rx, rx_in], priority = 1)]
     fn usart1(cx: usart1::Context) {
-        host_link::on_rx_interrupt(cx.local.rx, cx.local.rx_in);
+        usart::on_rx_interrupt(cx.local.rx, cx.local.rx_in);
     }
 
     /// The millisecond clock (also the EDM read timeout's).
@@ -276,7 +276,7 @@ mod app {
         let mut episode: u32 = 0;
         let mut buf = [0u8; 16];
         loop {
-            let n = host_link::take(rx_out, &mut buf);
+            let n = usart::take(rx_out, &mut buf);
             if buf[..n].contains(&b'R') {
                 episode += 1;
                 let params = EpisodeParams {

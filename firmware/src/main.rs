@@ -56,7 +56,7 @@
 //! **Structure.** An RTIC 2 app ([`serve`] for the protocol build, [`board`] for the
 //! instrument build): the session (or the board's controller) is a `#[shared]` resource,
 //! the USART1 receiver a `#[local]` of the task bound to USART1 (interrupt-driven receive
-//! into a queue, [`host_link`]), the transmitter and the queue's consumer locals of the
+//! into a queue, [`usart`]), the transmitter and the queue's consumer locals of the
 //! idle loop that serves; SysTick is a task that counts milliseconds. No mutable statics.
 #![no_std]
 #![no_main]
@@ -68,12 +68,12 @@ compile_error!("choose a defmt transport: feature `log-semihosting` or `log-rtt`
 mod board;
 pub mod clock_plan;
 mod console;
-mod host_link;
 #[cfg(semihosting_log)]
 mod log;
 #[cfg(not(feature = "board"))]
 mod serve;
 mod stack;
+mod usart;
 
 #[cfg(all(feature = "log-rtt", not(semihosting_log)))]
 use defmt_rtt as _;

@@ -4,7 +4,7 @@
 #[rtic::app(device = stm32f4xx_hal::pac)]
 mod app {
     use crate::console::{self, say};
-    use crate::host_link::{self, HostTx, RxQueue, RX_QUEUE};
+    use crate::usart::{self, HostTx, RxQueue, RX_QUEUE};
     use crate::Owned;
     use activesense_core::device::{Control, Session, SessionConfig, DEFAULT_TIMEOUT_MS};
     use cortex_m::peripheral::SYST;
@@ -97,7 +97,7 @@ mod app {
     /// Interrupt-driven receive into the queue.
     #[task(binds = USART1, local = [rx, rx_in], priority = 1)]
     fn usart1(cx: usart1::Context) {
-        host_link::on_rx_interrupt(cx.local.rx, cx.local.rx_in);
+        usart::on_rx_interrupt(cx.local.rx, cx.local.rx_in);
     }
 
     /// The millisecond clock.
@@ -126,7 +126,7 @@ mod app {
         );
         let mut buf = [0u8; 64];
         loop {
-            let n = host_link::take(rx_out, &mut buf);
+            let n = usart::take(rx_out, &mut buf);
             if n > 0 {
                 let control = cx.shared.session.lock(|s| {
                     let c = s.feed(&buf[..n], crate::millis(), tx);
