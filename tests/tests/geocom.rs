@@ -366,6 +366,35 @@ fn set_station_writes_the_pose_and_orientation() {
     );
 }
 
+/// A room that does not match its plan (here: a building site where four readings in ten
+/// stray) is not written to the instrument: the refusal says so in words, with the count of
+/// readings that are not on the plan, and nothing reaches the instrument's station.
+#[test]
+fn a_room_unlike_its_plan_is_not_written() {
+    let file = fixtures().join("l-room.json");
+    let mut a = args(dummy(), &file, None, AgentKind::Heuristic1);
+    a.set_station = true;
+    let mut cfg = sim_config(&a, vec![]);
+    cfg.sensor.site = activesense_instrument::world::site::SiteLevel::Site;
+    cfg.sensor.outlier_prob = 0.4;
+    let (link, state) = start_tcp(cfg);
+    a.link = link;
+    let msg = station(&a).expect_err("must refuse").to_string();
+    assert!(
+        msg.starts_with("the room does not match its plan: ")
+            && msg.contains("readings are not on the plan"),
+        "{msg}"
+    );
+    assert!(msg.contains("nothing written"), "{msg}");
+    let state = state.lock().unwrap().clone();
+    assert_eq!(state.station, [0.0; 4]);
+    // `station` is played in the room it stands in: it takes no --site.
+    let mut b = args(dummy(), &file, None, AgentKind::Heuristic1);
+    b.episode.site = activesense_instrument::world::site::SiteLevel::Furnished;
+    let msg = station(&b).expect_err("--site refused").to_string();
+    assert!(msg.contains("does not take --site"), "{msg}");
+}
+
 #[test]
 fn an_ambiguous_answer_is_not_written_without_a_tie_break() {
     let dir = tmpdir("sym");

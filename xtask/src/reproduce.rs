@@ -127,11 +127,13 @@ pub const STEPS: &[Step] = &[
     cli("agreement-edm", "results/edm", &["policy", "agreement", "--instrument", "edm", "--rot-bins", "1,10", "--plans", "200", "--int8", "policies/edm/k1/policy.q8", "--int8", "policies/edm/k10/policy.q8", "--json", "results/edm/policy-agreement.json"], 60),
     cli("agreement", "results", &["policy", "agreement", "--rot-bins", "1,10", "--plans", "200", "--int8", "policies/k1/policy.q8", "--int8", "policies/k10/policy.q8", "--json", "results/policy-agreement.json"], 60),
     Step { rebuilds: true, ..cli("calibration", "results/calibration", &["calibrate"], 720) },
-    Step { rebuilds: true, ..cli("calibration-edm", "results/calibration/edm", &["calibrate", "--instrument", "edm", "--no-progress"], 1216) },
+    Step { rebuilds: true, ..cli("calibration-edm", "results/calibration/edm", &["calibrate", "--instrument", "edm", "--site", "mixed", "--no-progress"], 1915) },
     cli("main-job", "results", &["eval", "--agents", "all", "--rot-bins", "1,10", "--plans", "1000", "--with-no-oracle", "--out", "results/", "--no-progress"], 100),
     cli("confident", "results/confident", &["eval", "--agents", "heuristic-1,learnt,learnt-int8,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--curve-plans", "0", "--out", "results/confident"], 100),
     cli("frontier-edm", "results/edm/frontier", &["eval", "--agents", "learnt,heuristic-1", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--instrument", "edm", "--stop-risks", "0.001,0.003,0.01,0.03,0.1", "--curve-plans", "0", "--no-progress", "--out", "results/edm/frontier"], 300),
     Step { runner: Runner::Example("station_sweep"), stdout_to: Some("results/edm/station-sweep.md"), ..cli("station-sweep-edm", "results/edm", &["--episodes", "10"], 60) },
+    Step { runner: Runner::Example("station_sweep"), stdout_to: Some("results/edm/station-sweep-furnished.md"), ..cli("station-sweep-edm-furnished", "results/edm", &["--episodes", "10", "--site", "furnished"], 90) },
+    Step { runner: Runner::Example("station_sweep"), stdout_to: Some("results/edm/station-sweep-site.md"), ..cli("station-sweep-edm-site", "results/edm", &["--episodes", "10", "--site", "site"], 90) },
     cli("frontier", "results/frontier", &["eval", "--agents", "learnt,heuristic-1,eem", "--rot-bins", "1,10", "--plans", "1000", "--termination", "confident", "--stop-risks", "0.001,0.003,0.01,0.03,0.1", "--curve-plans", "0", "--no-progress", "--out", "results/frontier"], 430),
     Step { runner: Runner::Example("select_seed"), stdout_to: Some("policies/k1/seeds.md"), ..cli("seeds-k1", "policies/k1", &["1", "policies/k1"], 60) },
     Step { runner: Runner::Example("select_seed"), stdout_to: Some("policies/k10/seeds.md"), ..cli("seeds-k10", "policies/k10", &["10", "policies/k10"], 150) },
@@ -588,12 +590,15 @@ fn check_eval_prefixes(ctx: &Ctx) -> Result<Vec<String>> {
             continue;
         }
         // `--with-no-oracle` writes a second run into no-oracle/ and, for the paper's sensor,
-        // the EDM-only instrument's into no-oracle-edm/: all are compared.
+        // the EDM-only instrument's into no-oracle-edm/, furnished and on sites into
+        // no-oracle-edm-{furnished,site}/: all are compared.
         let mut files = vec!["results.json".to_string()];
         if s.args.contains(&"--with-no-oracle") {
             files.push("no-oracle/results.json".into());
             if !s.args.contains(&"edm") {
                 files.push("no-oracle-edm/results.json".into());
+                files.push("no-oracle-edm-furnished/results.json".into());
+                files.push("no-oracle-edm-site/results.json".into());
             }
         }
         let mut committed_texts = Vec::new();

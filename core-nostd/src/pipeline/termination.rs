@@ -216,6 +216,17 @@ impl Pipeline {
         refined: &Refinement,
         rival_margin: f32,
     ) -> Option<StopFeatures> {
+        // No answer while a direction of it rests on one reading: that reading may be
+        // furniture, not the wall (`registration::precision::rests_on_one_reading`).
+        if crate::registration::precision::rests_on_one_reading(
+            &self.plan,
+            &self.observations,
+            &refined.registration.pose,
+            self.params.heading_known(),
+            stop::PRECISION_GATE,
+        ) {
+            return None;
+        }
         let grid = self.localizer.grid();
         let argmax = self.localizer.argmax()?;
         let answer = self.answer_cell(refined)?;

@@ -52,6 +52,100 @@ impl PoseCovariance {
     }
 }
 
+/// The range's derivatives `∂ρ/∂(x, y, θ)` of reading `p` at the pose `(a, theta)`, when
+/// the pose explains it (a wall on its ray, range residual within `gate`); see the module
+/// documentation.
+fn explained_row(
+    plan: &FloorPlan,
+    a: Vec2,
+    theta: f32,
+    p: &ObsPoint,
+    gate: f32,
+) -> Option<[f64; 3]> {
+    let d = rotate(p.d, theta);
+    let hit = plan.ray_cast(a, d)?;
+    if abs(length(p.s) - hit.range) > gate {
+        return None;
+    }
+    let n = plan.outward_normal(hit.wall);
+    let c = abs(n.x * d.x + n.y * d.y).max(MIN_COS_INCIDENCE) as f64;
+    let perp = n.x * -d.y + n.y * d.x;
+    Some([
+        -(n.x as f64) / c,
+        -(n.y as f64) / c,
+        -(hit.range as f64) * perp as f64 / c,
+    ])
+}
+
+/// True when the information matrix `info` leaves a direction free (by the test
+/// [`pose_covariance`] applies).
+fn singular(info: &[[f64; 3]; 3], fixed_heading: bool) -> bool {
+    let m = info;
+    let det = if fixed_heading {
+        m[0][0] * m[1][1] - m[0][1] * m[1][0]
+    } else {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            + m[0][1] * (m[1][2] * m[2][0] - m[1][0] * m[2][2])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let scale = if fixed_heading {
+        m[0][0] * m[1][1]
+    } else {
+        m[0][0] * m[1][1] * m[2][2]
+    };
+    det.is_nan() || det <= SINGULAR_RATIO * scale
+}
+
+/// True when some direction of the answer `pose` rests on one reading alone: with any one
+/// of the readings the pose explains left out, the others leave a direction free (or there
+/// are too few of them).
+///
+/// **Why.** A room is never its plan: a reading may have hit a cabinet in front of a wall,
+/// and the pose that explains that reading as the wall is off by the cabinet's depth
+/// along the one direction the reading fixes. Every other reading explains that pose as
+/// well, so nothing the stop reads can tell it from the right one, unless a second reading
+/// checks that direction. In furnished rooms (`--site furnished`) most of the confident
+/// wrong answers with the heading known were of this kind: three readings, two on one wall,
+/// the third, on a cabinet, the only one to fix the position along that wall
+/// (`docs/EVALUATION.md`, "Rooms that are not their plans"). Two passes, no buffer: the
+/// device's stack stays as it was.
+pub fn rests_on_one_reading(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    fixed_heading: bool,
+    gate: f32,
+) -> bool {
+    let a = pose.translation();
+    let mut info = [[0.0f64; 3]; 3];
+    let mut used = 0usize;
+    for p in obs.pts.iter() {
+        if let Some(j) = explained_row(plan, a, pose.theta, p, gate) {
+            for (u, ju) in j.iter().enumerate() {
+                for (v, jv) in j.iter().enumerate() {
+                    info[u][v] += ju * jv;
+                }
+            }
+            used += 1;
+        }
+    }
+    let unknowns = if fixed_heading { 2 } else { 3 };
+    if used <= unknowns {
+        return true;
+    }
+    obs.pts.iter().any(|p| {
+        explained_row(plan, a, pose.theta, p, gate).is_some_and(|j| {
+            let mut rest = info;
+            for (u, ju) in j.iter().enumerate() {
+                for (v, jv) in j.iter().enumerate() {
+                    rest[u][v] -= ju * jv;
+                }
+            }
+            singular(&rest, fixed_heading)
+        })
+    })
+}
+
 /// Why a pose has no precision.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum PrecisionError {
@@ -116,23 +210,10 @@ pub fn pose_covariance(
     let mut info = [[0.0f64; 3]; 3];
     let (mut used, mut left_out) = (0u16, 0u16);
     for p in obs.pts.iter() {
-        let d = rotate(p.d, pose.theta);
-        let Some(hit) = plan.ray_cast(a, d) else {
+        let Some(j) = explained_row(plan, a, pose.theta, p, gate) else {
             left_out += 1;
             continue;
         };
-        if abs(length(p.s) - hit.range) > gate {
-            left_out += 1;
-            continue;
-        }
-        let n = plan.outward_normal(hit.wall);
-        let c = abs(n.x * d.x + n.y * d.y).max(MIN_COS_INCIDENCE) as f64;
-        let perp = n.x * -d.y + n.y * d.x;
-        let j = [
-            -(n.x as f64) / c,
-            -(n.y as f64) / c,
-            -(hit.range as f64) * perp as f64 / c,
-        ];
         for (u, ju) in j.iter().enumerate() {
             for (v, jv) in j.iter().enumerate() {
                 info[u][v] += ju * jv;
@@ -213,6 +294,32 @@ mod tests {
             o.push(Measurement::new(b, hit.range)).unwrap();
         }
         o
+    }
+
+    /// Three readings with the heading known, two onto one wall: the third alone fixes the
+    /// position along that wall, so a cabinet in front of its wall could move the answer
+    /// unnoticed. A fourth onto the opposite wall checks it.
+    #[test]
+    fn a_direction_resting_on_one_reading_is_found() {
+        let plan = rect_about_origin(12.0, 8.0);
+        let pose = Pose2::new(1.0, -1.0, 0.0);
+        let bottom = [-FRAC_PI_2 - 0.3, -FRAC_PI_2 + 0.4];
+        let three = obs_at(&plan, &pose, &[bottom[0], bottom[1], 0.2]);
+        assert!(rests_on_one_reading(&plan, &three, &pose, true, 0.09));
+        let four = obs_at(&plan, &pose, &[bottom[0], bottom[1], 0.2, PI + 0.1]);
+        assert!(!rests_on_one_reading(&plan, &four, &pose, true, 0.09));
+        // Unknown heading: three readings are no more than the unknowns; the four above, two
+        // per direction and the heading from the pair on one wall, check every direction.
+        assert!(rests_on_one_reading(&plan, &three, &pose, false, 0.09));
+        assert!(!rests_on_one_reading(&plan, &four, &pose, false, 0.09));
+        // A reading the pose does not explain (a cabinet 0.6 m in front of the east wall)
+        // checks nothing: the direction it would have checked rests on the other one.
+        let mut cabinet = obs_at(&plan, &pose, &[bottom[0], bottom[1], PI + 0.1]);
+        let hit = plan.ray_cast(pose.translation(), unit(0.2)).unwrap();
+        cabinet
+            .push(Measurement::new(0.2, hit.range - 0.6))
+            .unwrap();
+        assert!(rests_on_one_reading(&plan, &cabinet, &pose, true, 0.09));
     }
 
     #[test]

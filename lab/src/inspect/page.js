@@ -80,6 +80,24 @@ window.addEventListener("error", function (e) {
     ctx.fillStyle = "#f3f3f3";
     poly(ctx, T.plan.vertices.map(function (v) { return P(v[0], v[1]); }));
     ctx.fill(); ctx.strokeStyle = "#222"; ctx.lineWidth = 2; ctx.stroke();
+    // the site: what stands in the room that the plan does not draw (--site), in violet
+    var site = T.site;
+    if (site) {
+      ctx.fillStyle = "rgba(131,56,236,0.25)"; ctx.strokeStyle = "#8338ec"; ctx.lineWidth = 1.5;
+      (site.obstacles || []).forEach(function (o) {
+        poly(ctx, o.corners.map(function (v) { return P(v[0], v[1]); }));
+        ctx.fill(); ctx.stroke();
+      });
+      var wv = site.as_built.vertices, nv = wv.length;
+      (site.openings || []).forEach(function (o) {
+        var a0 = wv[o.wall], b0 = wv[(o.wall + 1) % nv];
+        var p0 = P(a0[0] + (b0[0] - a0[0]) * o.from, a0[1] + (b0[1] - a0[1]) * o.from);
+        var p1 = P(a0[0] + (b0[0] - a0[0]) * o.to, a0[1] + (b0[1] - a0[1]) * o.to);
+        ctx.setLineDash(o.depth_behind === null || o.depth_behind === undefined ? [3, 3] : []);
+        ctx.lineWidth = 3; ctx.beginPath(); ctx.moveTo(p0[0], p0[1]); ctx.lineTo(p1[0], p1[1]); ctx.stroke();
+      });
+      ctx.setLineDash([]);
+    }
     // visual centre and placement disc
     var vc = P(T.placement.visual_centre[0], T.placement.visual_centre[1]);
     var r = P(T.placement.visual_centre[0] + T.placement.radius, T.placement.visual_centre[1])[0] - vc[0];
@@ -91,7 +109,9 @@ window.addEventListener("error", function (e) {
       var st = T.steps[i];
       if (st.action !== "Measure" || st.range === null || st.range === undefined) continue;
       var b = P(T.truth.x + st.range * Math.cos(st.world_bearing), T.truth.y + st.range * Math.sin(st.world_bearing));
-      ctx.strokeStyle = st.range_kind === "outlier" ? "#d08000" : "#1565c0"; ctx.lineWidth = 1.2;
+      ctx.strokeStyle = st.range_kind === "outlier" ? "#d08000"
+        : (st.range_kind === "clutter" || st.range_kind === "behind") ? "#8338ec" : "#1565c0";
+      ctx.lineWidth = 1.2;
       ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
       ctx.fillStyle = ctx.strokeStyle; ctx.beginPath(); ctx.arc(b[0], b[1], 2.5, 0, 2 * Math.PI); ctx.fill();
     }
@@ -116,6 +136,7 @@ window.addEventListener("error", function (e) {
         (o.pose_error !== null && o.pose_error !== undefined ? ", error " + o.pose_error.toFixed(4) + " m" : "") + ')' : "") +
       '<span class="sw" style="background:#1565c0"></span>ranges' +
       '<span class="sw" style="background:#d08000"></span>outliers' +
+      (site ? '<span class="sw" style="background:#8338ec"></span>site, not on the plan (' + site.level + '), and readings off it' : "") +
       '<span class="sw" style="background:#c62828"></span>beam now' +
       '<span class="sw" style="background:#999"></span>placement disc';
   }
