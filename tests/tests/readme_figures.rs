@@ -258,6 +258,62 @@ fn the_no_oracle_table_is_the_main_jobs_in(file: &str, heading: &str, results: &
     assert_eq!(checked, 18, "{file}: nine agents, K = 1 and 10");
 }
 
+/// The EDM-only instrument's agents room by room: one column group per site level (the room
+/// as its plan, furnished, a building site), from the main job's `results/no-oracle-edm*/`.
+const NO_ORACLE_SITES: &str = "### Without an oracle, in rooms that are not their plans (EDM only)";
+
+#[test]
+fn the_site_level_table_is_the_main_jobs() {
+    let levels = [
+        json("results/no-oracle-edm/results.json"),
+        json("results/no-oracle-edm-furnished/results.json"),
+        json("results/no-oracle-edm-site/results.json"),
+    ];
+    for file in HEADLINE_FILES {
+        let text = read(file);
+        assert!(
+            text.contains(NO_ORACLE_SITES),
+            "{file} has {NO_ORACLE_SITES}"
+        );
+        let mut checked = 0;
+        for c in table_after(&text, NO_ORACLE_SITES) {
+            let line = c.join(" | ");
+            let k: u64 = c[1].parse().unwrap();
+            for (g, results) in levels.iter().enumerate() {
+                let r = row(results, &c[0], k);
+                let at = 2 + 4 * g;
+                assert_eq!(c[at], fixed(r, "right", 3), "{line}");
+                assert_eq!(
+                    c[at + 1],
+                    format!(
+                        "{} ({:.1} %)",
+                        f(r, "wrong"),
+                        100.0 * f(r, "wrong_of_answered")
+                    ),
+                    "{line}"
+                );
+                assert_eq!(c[at + 2], fixed(r, "unanswered", 3), "{line}");
+                assert_eq!(c[at + 3], fixed(r, "cost", 3), "{line}");
+            }
+            checked += 1;
+        }
+        assert_eq!(
+            checked, 6,
+            "{file}: learnt, learnt-int8, heuristic-1 at K = 1 and 10"
+        );
+        // Right after the EDM-only table, before the paper's sensor's.
+        let (edm, sites, paper) = (
+            text.find(NO_ORACLE_EDM).unwrap(),
+            text.find(NO_ORACLE_SITES).unwrap(),
+            text.find(NO_ORACLE).unwrap(),
+        );
+        assert!(
+            edm < sites && sites < paper,
+            "{file}: the site table's place"
+        );
+    }
+}
+
 /// The frontier table (`docs/results.md`): per agent and K, cost and observed wrong answers at every
 /// `--stop-risk` setting of `results/frontier/frontier.json`.
 #[test]
