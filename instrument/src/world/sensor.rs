@@ -101,6 +101,21 @@ impl SensorModel {
         Ok(())
     }
 
+    /// The world stream's three draws of every reading: the outlier decision, its range and
+    /// the Gaussian noise, always all three and first, so the random stream does not depend
+    /// on the geometry (keeps episodes comparable across sensor settings and sites). `Err`
+    /// is the outlier reading; `Ok` the noise to add to a hit.
+    fn outlier_or_noise<R: Rng>(&self, rng: &mut R) -> Result<f32, (Option<f32>, RangeKind)> {
+        let outlier = rng.gen_bool(self.outlier_prob as f64);
+        let u: f32 = rng.gen_range(0.0..1.0);
+        let noise = self.sigma * standard_normal(rng);
+        if outlier {
+            Err((Some(u * self.max_range), RangeKind::Outlier))
+        } else {
+            Ok(noise)
+        }
+    }
+
     /// One EDM reading from `origin` along the model-frame direction `angle`.
     pub fn measure<R: Rng>(
         &self,
@@ -109,14 +124,10 @@ impl SensorModel {
         angle: f32,
         rng: &mut R,
     ) -> (Option<f32>, RangeKind) {
-        // Draw the outlier decision first, always, so the random stream does not depend on
-        // the geometry (keeps episodes comparable across sensor settings).
-        let outlier = rng.gen_bool(self.outlier_prob as f64);
-        let u: f32 = rng.gen_range(0.0..1.0);
-        let noise = self.sigma * standard_normal(rng);
-        if outlier {
-            return (Some(u * self.max_range), RangeKind::Outlier);
-        }
+        let noise = match self.outlier_or_noise(rng) {
+            Ok(noise) => noise,
+            Err(outlier) => return outlier,
+        };
         match plan.ray_cast(origin, unit(angle)) {
             Some(hit) if hit.range <= self.max_range && hit.incidence <= self.max_incidence => {
                 (Some((hit.range + noise).max(0.0)), RangeKind::Hit)
@@ -136,12 +147,10 @@ impl SensorModel {
         rng: &mut R,
         site_rng: &mut R,
     ) -> (Option<f32>, RangeKind) {
-        let outlier = rng.gen_bool(self.outlier_prob as f64);
-        let u: f32 = rng.gen_range(0.0..1.0);
-        let noise = self.sigma * standard_normal(rng);
-        if outlier {
-            return (Some(u * self.max_range), RangeKind::Outlier);
-        }
+        let noise = match self.outlier_or_noise(rng) {
+            Ok(noise) => noise,
+            Err(outlier) => return outlier,
+        };
         let person = if site.people > 0.0 {
             (site_rng.gen_range(0.0..1.0), site_rng.gen_range(0.0..1.0))
         } else {
