@@ -216,9 +216,10 @@ impl Pipeline {
         refined: &Refinement,
         rival_margin: f32,
     ) -> Option<StopFeatures> {
-        // No answer while a direction of it rests on one reading: that reading may be
-        // furniture, not the wall (`registration::precision::rests_on_one_reading`).
-        if crate::registration::precision::rests_on_one_reading(
+        // No answer while a direction of it rests on one wall: a reading may be furniture,
+        // not the wall, and a wall may stand off its drawn line; a second wall along each
+        // direction shows either (`registration::precision::rests_on_one_wall`).
+        if crate::registration::precision::rests_on_one_wall(
             &self.plan,
             &self.observations,
             &refined.registration.pose,
@@ -279,6 +280,7 @@ impl Pipeline {
         Some(stop::AnswerPrecision {
             position: crate::world::math::sqrt((cov.cov[0][0] + cov.cov[1][1]).max(0.0)),
             heading: cov.sigma_heading(),
+            variance_factor: cov.variance_factor,
         })
     }
 

@@ -30,6 +30,13 @@ pub struct PoseCovariance {
     pub left_out: u16,
     /// Unknowns of the pose (2 with the heading known, 3 without).
     pub unknowns: u8,
+    /// The a-posteriori variance factor `σ̂₀² = Σ rᵢ² / σ² / (used − unknowns)` of the
+    /// explained readings' range residuals `rᵢ` at the pose (1 when no reading is
+    /// redundant): about 1 when the readings scatter as the EDM's noise does, well above it
+    /// when the room is not where the plan draws it (a wall a few cm off its line: the
+    /// global test of a least-squares adjustment). The covariance above does not include
+    /// it: it is what the readings' geometry allows, this is how well they agree.
+    pub variance_factor: f32,
 }
 
 impl PoseCovariance {
@@ -62,19 +69,36 @@ fn explained_row(
     p: &ObsPoint,
     gate: f32,
 ) -> Option<[f64; 3]> {
+    explained_row_on(plan, a, theta, p, gate).map(|(_, _, j)| j)
+}
+
+/// [`explained_row`] with the wall the reading hits and its range residual (m, measured
+/// minus predicted).
+fn explained_row_on(
+    plan: &FloorPlan,
+    a: Vec2,
+    theta: f32,
+    p: &ObsPoint,
+    gate: f32,
+) -> Option<(usize, f32, [f64; 3])> {
     let d = rotate(p.d, theta);
     let hit = plan.ray_cast(a, d)?;
-    if abs(length(p.s) - hit.range) > gate {
+    let residual = length(p.s) - hit.range;
+    if abs(residual) > gate {
         return None;
     }
     let n = plan.outward_normal(hit.wall);
     let c = abs(n.x * d.x + n.y * d.y).max(MIN_COS_INCIDENCE) as f64;
     let perp = n.x * -d.y + n.y * d.x;
-    Some([
-        -(n.x as f64) / c,
-        -(n.y as f64) / c,
-        -(hit.range as f64) * perp as f64 / c,
-    ])
+    Some((
+        hit.wall,
+        residual,
+        [
+            -(n.x as f64) / c,
+            -(n.y as f64) / c,
+            -(hit.range as f64) * perp as f64 / c,
+        ],
+    ))
 }
 
 /// True when the information matrix `info` leaves a direction free (by the test
@@ -146,6 +170,66 @@ pub fn rests_on_one_reading(
     })
 }
 
+/// True when some direction of the answer `pose` rests on one wall alone: with every
+/// reading on any one wall left out, the others leave a direction free (or there are too
+/// few of them). Implies [`rests_on_one_reading`] (fewer readings never fix more).
+///
+/// **Why.** As-built walls stand a few centimetres off their drawn lines
+/// (`--site site` moves one by 3–6 cm). Readings on one wall agree with each other
+/// however far that wall is off, so a direction fixed by one wall alone carries the
+/// wall's error into the answer unseen; a second wall along that direction either
+/// halves it or shows it as residuals. One accumulator per wall (six `f32`, 1.5 KiB of
+/// stack at [`crate::limits::MAX_VERTICES`] walls), one ray cast per reading.
+pub fn rests_on_one_wall(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    fixed_heading: bool,
+    gate: f32,
+) -> bool {
+    let a = pose.translation();
+    let mut per_wall = [[0.0f32; 6]; crate::limits::MAX_VERTICES];
+    let mut info = [[0.0f64; 3]; 3];
+    let mut used = 0usize;
+    for p in obs.pts.iter() {
+        let Some((wall, _, j)) = explained_row_on(plan, a, pose.theta, p, gate) else {
+            continue;
+        };
+        let Some(acc) = per_wall.get_mut(wall) else {
+            continue;
+        };
+        for (u, ju) in j.iter().enumerate() {
+            for (v, jv) in j.iter().enumerate() {
+                info[u][v] += ju * jv;
+            }
+        }
+        for (k, (u, v)) in UPPER.iter().enumerate() {
+            acc[k] += (j[*u] * j[*v]) as f32;
+        }
+        used += 1;
+    }
+    let unknowns = if fixed_heading { 2 } else { 3 };
+    if used <= unknowns {
+        return true;
+    }
+    per_wall.iter().any(|acc| {
+        if acc.iter().all(|&x| x == 0.0) {
+            return false;
+        }
+        let mut rest = info;
+        for (k, (u, v)) in UPPER.iter().enumerate() {
+            rest[*u][*v] -= acc[k] as f64;
+            if u != v {
+                rest[*v][*u] -= acc[k] as f64;
+            }
+        }
+        singular(&rest, fixed_heading)
+    })
+}
+
+/// The upper triangle of a symmetric 3 × 3 matrix, row by row.
+const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+
 /// Why a pose has no precision.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum PrecisionError {
@@ -209,11 +293,13 @@ pub fn pose_covariance(
     let unknowns: u8 = if fixed_heading { 2 } else { 3 };
     let mut info = [[0.0f64; 3]; 3];
     let (mut used, mut left_out) = (0u16, 0u16);
+    let mut sum_sq = 0.0f64;
     for p in obs.pts.iter() {
-        let Some(j) = explained_row(plan, a, pose.theta, p, gate) else {
+        let Some((_, residual, j)) = explained_row_on(plan, a, pose.theta, p, gate) else {
             left_out += 1;
             continue;
         };
+        sum_sq += (residual as f64) * (residual as f64);
         for (u, ju) in j.iter().enumerate() {
             for (v, jv) in j.iter().enumerate() {
                 info[u][v] += ju * jv;
@@ -271,11 +357,18 @@ pub fn pose_covariance(
             }
         }
     }
+    let redundancy = used.saturating_sub(unknowns as u16);
+    let variance_factor = if redundancy == 0 {
+        1.0
+    } else {
+        (sum_sq / s2 / redundancy as f64) as f32
+    };
     Ok(PoseCovariance {
         cov,
         used,
         left_out,
         unknowns,
+        variance_factor,
     })
 }
 
@@ -320,6 +413,60 @@ mod tests {
             .push(Measurement::new(0.2, hit.range - 0.6))
             .unwrap();
         assert!(rests_on_one_reading(&plan, &cabinet, &pose, true, 0.09));
+    }
+
+    /// Four readings with the heading known, two on the south wall and two on the east:
+    /// each direction rests on one wall, so a wall off its drawn line would move the
+    /// answer unseen, though no single reading is alone. Readings on the north and west
+    /// walls check both.
+    #[test]
+    fn a_direction_resting_on_one_wall_is_found() {
+        let plan = rect_about_origin(12.0, 8.0);
+        let pose = Pose2::new(1.0, -1.0, 0.0);
+        let two_walls = [-FRAC_PI_2 - 0.3, -FRAC_PI_2 + 0.4, -0.2, 0.2];
+        let four = obs_at(&plan, &pose, &two_walls);
+        assert!(!rests_on_one_reading(&plan, &four, &pose, true, 0.09));
+        assert!(rests_on_one_wall(&plan, &four, &pose, true, 0.09));
+        let all = [two_walls.as_slice(), &[FRAC_PI_2 + 0.1, PI + 0.1]].concat();
+        let six = obs_at(&plan, &pose, &all);
+        assert!(!rests_on_one_wall(&plan, &six, &pose, true, 0.09));
+        assert!(!rests_on_one_wall(&plan, &six, &pose, false, 0.09));
+        // What rests on one reading rests on one wall.
+        let three = obs_at(&plan, &pose, &[-FRAC_PI_2 - 0.3, -FRAC_PI_2 + 0.4, 0.2]);
+        assert!(rests_on_one_wall(&plan, &three, &pose, true, 0.09));
+    }
+
+    /// Readings that hit the plan's walls exactly have a variance factor near 0; moving
+    /// the east wall 5 cm (readings 5 cm long there) against a 1 cm EDM raises it far
+    /// above 1, though every reading stays within the 9 cm gate.
+    #[test]
+    fn a_wall_off_its_line_raises_the_variance_factor() {
+        let plan = rect_about_origin(12.0, 8.0);
+        let pose = Pose2::new(1.0, -1.0, 0.0);
+        let bearings = [
+            -FRAC_PI_2 - 0.3,
+            -FRAC_PI_2 + 0.4,
+            -0.2,
+            0.2,
+            FRAC_PI_2 + 0.1,
+            PI + 0.1,
+        ];
+        let exact = obs_at(&plan, &pose, &bearings);
+        let cov = pose_covariance(&plan, &exact, &pose, true, 0.01, 0.09).unwrap();
+        assert!(cov.variance_factor < 1e-3, "{}", cov.variance_factor);
+        let mut moved = Observations::new();
+        for &b in &bearings {
+            let hit = plan.ray_cast(pose.translation(), unit(b)).unwrap();
+            let off = if hit.point.x > 5.9 {
+                0.05 / cos(b)
+            } else {
+                0.0
+            };
+            moved.push(Measurement::new(b, hit.range + off)).unwrap();
+        }
+        let cov = pose_covariance(&plan, &moved, &pose, true, 0.01, 0.09).unwrap();
+        assert_eq!(cov.used, 6);
+        assert!(cov.variance_factor > 5.0, "{}", cov.variance_factor);
     }
 
     #[test]

@@ -45,7 +45,7 @@ pub const GATE_PEAK_MASS: f32 = 0.1;
 pub const EDGE_SCALE: f32 = 0.02;
 
 /// Number of features of [`StopFeatures::to_vector`].
-pub const FEATURES: usize = 17;
+pub const FEATURES: usize = 18;
 
 /// Range noise (m) the answer's precision ([`StopFeatures::precision`]) is computed with: the
 /// EDM's own σ. Only the ratio between answers matters to the fitted model.
@@ -144,6 +144,22 @@ pub struct AnswerPrecision {
     pub position: f32,
     /// Of the heading (rad; 0 when it is known).
     pub heading: f32,
+    /// How well the explained readings agree with the plan at the answer: the
+    /// a-posteriori variance factor of their range residuals
+    /// ([`crate::registration::precision::PoseCovariance::variance_factor`], at
+    /// [`PRECISION_SIGMA`]).
+    ///
+    /// **Why the stop reads it.** As-built walls stand centimetres off their drawn lines
+    /// (`--site site`): readings within the 9 cm gate are "explained" and the geometry
+    /// pins the pose, yet the answer carries a wall's offset. What shows it is readings
+    /// that disagree by more than the EDM's noise (on the site level's wrong answers, K = 1,
+    /// the residuals' χ² was at the 0.04 % and 1.5 % tails).
+    #[serde(default = "unit_variance_factor")]
+    pub variance_factor: f32,
+}
+
+fn unit_variance_factor() -> f32 {
+    1.0
 }
 
 impl StopFeatures {
@@ -157,7 +173,8 @@ impl StopFeatures {
     /// itself, and the first unexplained reading of a rival is worth more than the rest.
     /// Then the answer's precision: whether it has none, and the logs of its position and
     /// heading standard deviations in units of the surveyor's tolerance (5 cm, 0.5°),
-    /// clamped to [10⁻³, 10].
+    /// clamped to [10⁻³, 10]; last, the log of the residuals' variance factor clamped to
+    /// [0.1, 100] (0 without a precision).
     pub fn to_vector(&self) -> [f32; FEATURES] {
         let m = if self.rival_margin.is_nan() {
             0.0
@@ -189,6 +206,13 @@ impl StopFeatures {
             }),
             self.precision.map_or(0.0, |p| {
                 log_ratio(p.heading, Tolerance::SURVEYOR.heading_rad)
+            }),
+            self.precision.map_or(0.0, |p| {
+                ln(if p.variance_factor.is_nan() {
+                    100.0
+                } else {
+                    p.variance_factor.clamp(0.1, 100.0)
+                })
             }),
         ]
     }
@@ -420,7 +444,7 @@ mod tests {
             rot_bins: 10,
             weights: [
                 -1.0, 0.0, 0.0, 2.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                0.0,
+                0.0, 0.0,
             ],
             bias: 0.5,
             thresholds: [0.001, 0.003, 0.01, 0.03, 0.1],
@@ -445,41 +469,47 @@ mod tests {
 
     #[test]
     fn the_precision_features_are_logs_of_the_tolerance_ratio() {
-        let last3 = |f: &StopFeatures| {
+        let last4 = |f: &StopFeatures| {
             let v = f.to_vector();
-            [v[FEATURES - 3], v[FEATURES - 2], v[FEATURES - 1]]
+            [
+                v[FEATURES - 4],
+                v[FEATURES - 3],
+                v[FEATURES - 2],
+                v[FEATURES - 1],
+            ]
+        };
+        let precision = |position: f32, heading: f32, variance_factor: f32| AnswerPrecision {
+            position,
+            heading,
+            variance_factor,
         };
         // No precision: the flag, and the logs read zero.
-        assert_eq!(last3(&features(0.9, 8, 8)), [1.0, 0.0, 0.0]);
-        // At the tolerance itself (5 cm, 0.5°) both logs are 0; a tenth is ln 0.1.
+        assert_eq!(last4(&features(0.9, 8, 8)), [1.0, 0.0, 0.0, 0.0]);
+        // At the tolerance itself (5 cm, 0.5°) both logs are 0; a tenth is ln 0.1. Readings
+        // that scatter as the EDM does (variance factor 1) read 0 too.
         let mut f = features(0.9, 8, 8);
-        f.precision = Some(AnswerPrecision {
-            position: 0.05,
-            heading: 0.5f32.to_radians(),
-        });
-        let v = last3(&f);
+        f.precision = Some(precision(0.05, 0.5f32.to_radians(), 1.0));
+        let v = last4(&f);
         assert_eq!(v[0], 0.0);
-        assert!(v[1].abs() < 1e-5 && v[2].abs() < 1e-5, "{v:?}");
-        f.precision = Some(AnswerPrecision {
-            position: 0.005,
-            heading: 0.05f32.to_radians(),
-        });
-        let v = last3(&f);
+        assert!(
+            v[1].abs() < 1e-5 && v[2].abs() < 1e-5 && v[3] == 0.0,
+            "{v:?}"
+        );
+        f.precision = Some(precision(0.005, 0.05f32.to_radians(), 9.0));
+        let v = last4(&f);
         assert!((v[1] - 0.1f32.ln()).abs() < 1e-4 && (v[2] - 0.1f32.ln()).abs() < 1e-4);
-        // A known heading (σ = 0), a huge σ and a NaN stay finite: clamped to [1e-3, 10].
-        f.precision = Some(AnswerPrecision {
-            position: f32::NAN,
-            heading: 0.0,
-        });
-        let v = last3(&f);
+        assert!((v[3] - 9f32.ln()).abs() < 1e-5, "{v:?}");
+        // A known heading (σ = 0), a huge σ and a NaN stay finite: clamped to [1e-3, 10]
+        // (the variance factor to [0.1, 100], a NaN reading as its upper end).
+        f.precision = Some(precision(f32::NAN, 0.0, f32::NAN));
+        let v = last4(&f);
         assert!((v[1] - 10f32.ln()).abs() < 1e-5, "{v:?}");
         assert!((v[2] - 1e-3f32.ln()).abs() < 1e-4, "{v:?}");
-        f.precision = Some(AnswerPrecision {
-            position: 1e9,
-            heading: f32::INFINITY,
-        });
-        let v = last3(&f);
+        assert!((v[3] - 100f32.ln()).abs() < 1e-5, "{v:?}");
+        f.precision = Some(precision(1e9, f32::INFINITY, 0.0));
+        let v = last4(&f);
         assert!((v[1] - 10f32.ln()).abs() < 1e-5 && (v[2] - 10f32.ln()).abs() < 1e-5);
+        assert!((v[3] - 0.1f32.ln()).abs() < 1e-5, "{v:?}");
     }
 
     #[test]

@@ -163,6 +163,13 @@ pub const MISMATCH_SHARE: f64 = 0.25;
 /// (one stray return is the EDM's outlier rate at work, not a room unlike its plan).
 pub const MISMATCH_MIN_READINGS: usize = 2;
 
+/// Variance factor of the explained readings' residuals
+/// ([`PoseCovariance::variance_factor`]) above which the answer warns that they disagree
+/// with the plan: residuals twice the EDM's σ rms. Readings that scatter as the EDM does
+/// exceed it with probability e⁻⁴ ≈ 1.8 % at two spare readings and far less with more; a
+/// wall 5 cm off its drawn line read against one on its line exceeds it.
+pub const DISAGREEING_VARIANCE_FACTOR: f32 = 4.0;
+
 /// The answer checked against the simulated truth (simulation only).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TruthCheck {
@@ -395,6 +402,17 @@ impl Answer {
                         }
                     )
                 };
+                let sigma_mm = 1000.0 * PRECISION_SIGMA_FACTOR * i.range_sigma;
+                if !c.exactly_determined() && c.variance_factor.is_finite() {
+                    let rms_mm = sigma_mm * c.variance_factor.max(0.0).sqrt();
+                    a.precision
+                        .push_str(&format!("; residuals {rms_mm:.1} mm rms"));
+                    if c.variance_factor > DISAGREEING_VARIANCE_FACTOR {
+                        a.precision.push_str(&format!(
+                            "; WARNING: the readings disagree with the plan by more than the EDM's noise ({rms_mm:.1} mm rms against σ {sigma_mm:.1} mm): a wall may stand off its drawn line"
+                        ));
+                    }
+                }
                 if 2 * (c.used as usize) < i.readings.len() {
                     a.precision.push_str(&format!(
                         "; WARNING: only {} of {} readings fit this pose, it is likely wrong",
