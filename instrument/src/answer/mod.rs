@@ -717,6 +717,48 @@ mod tests {
         }
     }
 
+    /// Readings that scatter as the EDM does are stated as residuals and nothing more;
+    /// readings on one wall 5 cm long (the wall stands off its drawn line, still within the
+    /// 9 cm that count as explained) make the answer warn in words.
+    #[test]
+    fn readings_that_disagree_with_the_plan_are_warned_of() {
+        let plan = rect();
+        let frame = PlanFrame::default();
+        let pose = Pose2::new(1.0, 0.5, 0.3);
+        let bearings = [0.0, 0.9, 1.7, 2.6, 3.4, 4.3, 5.1, 5.8];
+        let clean = readings(&plan, &pose, &bearings);
+        let a = Answer::new(&input(&plan, &frame, pose, &clean, false));
+        assert!(
+            a.precision.contains("residuals 0.0 mm rms"),
+            "{}",
+            a.precision
+        );
+        assert!(!a.precision.contains("disagree"), "{}", a.precision);
+        let wall = |m: &Measurement| {
+            plan.ray_cast(pose.translation(), rotate(unit(m.bearing), pose.theta))
+                .unwrap()
+                .wall
+        };
+        let moved = wall(&clean[0]);
+        let off: Vec<Measurement> = clean
+            .iter()
+            .map(|m| {
+                let extra = if wall(m) == moved { 0.05 } else { 0.0 };
+                Measurement::new(m.bearing, m.range + extra)
+            })
+            .collect();
+        let a = Answer::new(&input(&plan, &frame, pose, &off, false));
+        assert!(a.readings.iter().all(|r| r.fit == ReadingFit::Explained));
+        assert!(
+            a.precision.contains(
+                "WARNING: the readings disagree with the plan by more than the EDM's noise"
+            ),
+            "{}",
+            a.precision
+        );
+        assert!(a.to_text().contains("a wall may stand off its drawn line"));
+    }
+
     /// Readings the plan explains stay quiet; a room whose readings hit things the plan does
     /// not draw says so, with the bearing, the measured and the expected range, and the walls.
     #[test]
