@@ -6,6 +6,9 @@
 
 /// Largest number of floor-plan vertices ([`crate::FloorPlan`]).
 pub const MAX_VERTICES: usize = 64;
+/// Largest number of rings of a floor-plan: its outline and up to eight columns
+/// ([`crate::FloorPlan`]; the columns share [`MAX_VERTICES`] with the outline).
+pub const MAX_RINGS: usize = 9;
 
 /// Largest number of localizer translation cells along x.
 pub const MAX_NX: usize = 30;
@@ -43,4 +46,6 @@ const _: () = assert!(EVAL_MAX_ACTIONS <= MAX_EPISODE_ACTIONS);
 const _: () = assert!(MAX_NX <= 255 && MAX_NY <= 255 && MAX_ROT_BINS <= 255);
 const _: () = assert!(SCAN_PIXELS <= 32);
 const _: () = assert!(MAX_VERTICES <= 255);
+// Ring ends travel as u8; door openings are a u64 bit mask over the walls.
+const _: () = assert!(MAX_RINGS <= 255 && MAX_VERTICES <= 64);
 const _: () = assert!(DEFAULT_STOP_RISK > 0.0 && DEFAULT_STOP_RISK <= 1.0);

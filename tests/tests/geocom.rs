@@ -105,9 +105,20 @@ fn through_sim(
 
 fn every_fixture_room() -> Vec<(PathBuf, Option<String>)> {
     let mut out = Vec::new();
+    // The fixture rooms, and those with columns and doors one folder down.
     let mut files: Vec<_> = std::fs::read_dir(fixtures())
         .unwrap()
         .map(|e| e.unwrap().path())
+        .flat_map(|p| {
+            if p.is_dir() {
+                std::fs::read_dir(&p)
+                    .unwrap()
+                    .map(|e| e.unwrap().path())
+                    .collect()
+            } else {
+                vec![p]
+            }
+        })
         .collect();
     files.sort();
     for f in files {

@@ -6,9 +6,9 @@
 use super::controller::{Controller, Step};
 use crate::limits::SCAN_PIXELS;
 use crate::protocol::*;
-use crate::world::floorplan::{FloorPlan, PlanError, MAX_VERTICES};
+use crate::world::floorplan::{FloorPlan, MAX_VERTICES};
 use embedded_io::{Read, Write};
-use heapless::{String as HString, Vec as HVec};
+use heapless::String as HString;
 
 /// Largest encoded reply frame.
 pub const MAX_REPLY: usize = 256;
@@ -397,7 +397,11 @@ impl Session {
         let r = match req {
             Request::Hello { .. } => Response::Error(WireError::UnexpectedRequest),
             Request::Ping { nonce } => Response::Pong { nonce },
-            Request::LoadPlan { vertices } => self.load_plan(&vertices),
+            Request::LoadPlan {
+                vertices,
+                rings,
+                openings,
+            } => self.load_plan(&vertices, &rings, openings),
             Request::StartEpisode(p) => {
                 if self.ctl.is_running() {
                     Response::Error(WireError::UnexpectedRequest)
@@ -455,18 +459,12 @@ impl Session {
         (r, Control::Continue)
     }
 
-    fn load_plan(&mut self, vertices: &[[f32; 2]]) -> Response {
+    fn load_plan(&mut self, vertices: &[[f32; 2]], rings: &[u8], openings: u64) -> Response {
         if self.ctl.is_running() {
             return Response::Error(WireError::UnexpectedRequest);
         }
-        if vertices.len() > MAX_VERTICES {
-            return Response::Error(WireError::InvalidPlan(PlanError::TooManyVertices));
-        }
-        let mut raw: HVec<[f32; 2], MAX_VERTICES> = HVec::new();
-        for v in vertices {
-            let _ = raw.push(*v);
-        }
-        match FloorPlan::from_raw(raw) {
+        // Capacities are checked by `from_parts` (TooManyVertices, TooManyRings).
+        match FloorPlan::from_parts(vertices, rings, openings) {
             Ok(plan) => {
                 let summary = PlanSummary {
                     vertices: plan.len() as u8,
@@ -509,7 +507,9 @@ mod tests {
     use super::*;
     use crate::episode::{Action, AgentKind, EpisodeConfig, Observation, Termination};
     use crate::fixtures::rect_4x3_wire;
+    use crate::world::floorplan::PlanError;
     use crate::world::geometry::Pose2;
+    use heapless::Vec as HVec;
     use std::vec::Vec;
 
     struct Sink(Vec<u8>);
@@ -601,7 +601,9 @@ mod tests {
                 &mut s,
                 6,
                 &Request::LoadPlan {
-                    vertices: rect_4x3_wire()
+                    vertices: rect_4x3_wire(),
+                    rings: heapless::Vec::new(),
+                    openings: 0,
                 }
             ),
             Response::PlanLoaded(_)
@@ -612,7 +614,9 @@ mod tests {
                 &mut s,
                 6,
                 &Request::LoadPlan {
-                    vertices: rect_4x3_wire()
+                    vertices: rect_4x3_wire(),
+                    rings: heapless::Vec::new(),
+                    openings: 0,
                 }
             ),
             Response::PlanLoaded(_)
@@ -744,6 +748,8 @@ mod tests {
             2,
             &Request::LoadPlan {
                 vertices: rect_4x3_wire(),
+                rings: heapless::Vec::new(),
+                openings: 0,
             },
         );
         s
@@ -768,10 +774,8 @@ mod tests {
             );
         }
         // The session keeps serving: a baseline episode starts.
-        assert!(matches!(
-            call(&mut s, 7, &Request::StartEpisode(params(5))),
-            Response::Act { step: 0, .. }
-        ));
+        let r = call(&mut s, 7, &Request::StartEpisode(params(5)));
+        assert!(matches!(r, Response::Act { step: 0, .. }), "{r:?}");
     }
 
     /// A blob serves only episodes of its instrument profile: with the paper's sensor's blob
@@ -800,6 +804,69 @@ mod tests {
     }
 
     #[test]
+    fn plans_with_columns_and_doors_load_and_bad_ones_are_refused() {
+        use crate::world::geometry::v2;
+        let mut s = Session::new(CFG);
+        call(
+            &mut s,
+            1,
+            &Request::Hello {
+                protocol: PROTOCOL_VERSION,
+            },
+        );
+        // A 4 × 3 m room about the origin, a 0.4 m column, a door in the bottom wall.
+        let plan = FloorPlan::with_columns_and_doors(
+            &[v2(-2.0, -1.5), v2(2.0, -1.5), v2(2.0, 1.5), v2(-2.0, 1.5)],
+            &[&[v2(0.8, 0.3), v2(1.2, 0.3), v2(1.2, 0.7), v2(0.8, 0.7)]],
+            &[(v2(-1.5, -1.5), v2(-0.7, -1.5))],
+            0.02,
+        )
+        .unwrap()
+        .centered();
+        let load = |vertices: &[[f32; 2]], rings: &[u8], openings: u64| Request::LoadPlan {
+            vertices: HVec::from_slice(vertices).unwrap(),
+            rings: HVec::from_slice(rings).unwrap(),
+            openings,
+        };
+        match call(
+            &mut s,
+            2,
+            &load(plan.raw(), plan.ring_ends(), plan.openings()),
+        ) {
+            Response::PlanLoaded(summary) => assert_eq!(summary.vertices, 10),
+            other => panic!("{other:?}"),
+        }
+        // An opening on the column's wall, then a column ring of two vertices.
+        assert_eq!(
+            call(
+                &mut s,
+                3,
+                &load(plan.raw(), plan.ring_ends(), plan.openings() | 1 << 8)
+            ),
+            Response::Error(WireError::InvalidPlan(PlanError::OpeningNotOnOutline(8)))
+        );
+        assert_eq!(
+            call(&mut s, 4, &load(plan.raw(), &[6, 8, 10], plan.openings())),
+            Response::Error(WireError::InvalidPlan(PlanError::RingTooSmall(1)))
+        );
+        assert_eq!(
+            call(
+                &mut s,
+                5,
+                &load(plan.raw(), &[1, 2, 3, 4, 5, 6, 7, 8, 9, 10], 0)
+            ),
+            Response::Error(WireError::InvalidPlan(PlanError::TooManyRings))
+        );
+        // The session keeps serving, on the plan it loaded.
+        assert_eq!(
+            call(&mut s, 6, &Request::Ping { nonce: 7 }),
+            Response::Pong { nonce: 7 }
+        );
+        let r = call(&mut s, 7, &Request::StartEpisode(params(5)));
+        assert!(matches!(r, Response::Act { step: 0, .. }), "{r:?}");
+    }
+
+    #[test]
     fn bad_inputs_get_typed_errors() {
         let mut s = Session::new(CFG);
         call(
@@ -812,7 +879,15 @@ mod tests {
         let bow: HVec<_, MAX_WIRE_VERTICES> =
             HVec::from_slice(&[[0.0, 0.0], [2.0, 2.0], [2.0, 0.0], [0.0, 2.0]]).unwrap();
         assert!(matches!(
-            call(&mut s, 2, &Request::LoadPlan { vertices: bow }),
+            call(
+                &mut s,
+                2,
+                &Request::LoadPlan {
+                    vertices: bow,
+                    rings: heapless::Vec::new(),
+                    openings: 0
+                }
+            ),
             Response::Error(WireError::InvalidPlan(PlanError::SelfIntersection(..)))
         ));
         let mut many = HVec::<_, MAX_WIRE_VERTICES>::new();
@@ -822,7 +897,15 @@ mod tests {
                 .unwrap();
         }
         assert_eq!(
-            call(&mut s, 3, &Request::LoadPlan { vertices: many }),
+            call(
+                &mut s,
+                3,
+                &Request::LoadPlan {
+                    vertices: many,
+                    rings: heapless::Vec::new(),
+                    openings: 0
+                }
+            ),
             Response::Error(WireError::InvalidPlan(PlanError::TooManyVertices))
         );
         assert_eq!(
@@ -834,6 +917,8 @@ mod tests {
             5,
             &Request::LoadPlan {
                 vertices: rect_4x3_wire(),
+                rings: heapless::Vec::new(),
+                openings: 0,
             },
         );
         let mut p = params(5);
@@ -964,6 +1049,8 @@ mod tests {
             2,
             &Request::LoadPlan {
                 vertices: rect_4x3_wire(),
+                rings: heapless::Vec::new(),
+                openings: 0,
             },
         );
         call(&mut s, 3, &Request::StartEpisode(params(50)));

@@ -57,7 +57,7 @@ impl RTable {
 
     /// Number of points the plan needs at `spacing` (m).
     pub fn points_needed(plan: &FloorPlan, spacing: f32) -> u32 {
-        (0..plan.len())
+        plan.solid_walls()
             .map(|i| {
                 let (a, b) = plan.wall(i);
                 wall_points(length(b - a), spacing)
@@ -76,7 +76,8 @@ impl RTable {
             });
         }
         let mut k = 0usize;
-        for i in 0..plan.len() {
+        // Solid walls only (a door opening is not a surface the EDM can hit).
+        for i in plan.solid_walls() {
             let (a, b) = plan.wall(i);
             let n = plan.outward_normal(i);
             let cnt = wall_points(length(b - a), spacing);

@@ -276,7 +276,7 @@ mod tests {
     use super::*;
     use crate::episode::{ActionCosts, AgentKind, EpisodeConfig, Observation, Termination};
     use crate::protocol::{EpisodeParams, Request, MAX_WIRE_VERTICES, PROTOCOL_VERSION};
-    use crate::world::geometry::Pose2;
+    use crate::world::geometry::{v2, Pose2};
     use heapless::Vec as HVec;
 
     #[test]
@@ -386,7 +386,47 @@ mod tests {
         for i in 0..MAX_WIRE_VERTICES {
             v.push([i as f32, -(i as f32)]).unwrap();
         }
-        roundtrip(&Request::LoadPlan { vertices: v });
+        // The largest LoadPlan: every vertex, every ring end, every opening bit.
+        let mut rings = HVec::new();
+        for r in 0..crate::protocol::MAX_WIRE_RINGS {
+            rings.push(200 + r as u8).unwrap();
+        }
+        roundtrip(&Request::LoadPlan {
+            vertices: v.clone(),
+            rings,
+            openings: u64::MAX,
+        });
+        // A room with a column and a door, as the host sends it.
+        let p = crate::FloorPlan::with_columns_and_doors(
+            &[v2(0.0, 0.0), v2(6.0, 0.0), v2(6.0, 4.0), v2(0.0, 4.0)],
+            &[&[v2(3.5, 1.5), v2(3.5, 2.5), v2(4.5, 2.5), v2(4.5, 1.5)]],
+            &[(v2(1.0, 0.0), v2(2.0, 0.0))],
+            0.02,
+        )
+        .unwrap();
+        let msg = Request::LoadPlan {
+            vertices: HVec::from_slice(p.raw()).unwrap(),
+            rings: HVec::from_slice(p.ring_ends()).unwrap(),
+            openings: p.openings(),
+        };
+        roundtrip(&msg);
+        let Request::LoadPlan {
+            vertices,
+            rings,
+            openings,
+        } = msg
+        else {
+            unreachable!()
+        };
+        assert_eq!(
+            crate::FloorPlan::from_parts(&vertices, &rings, openings).as_ref(),
+            Ok(&p)
+        );
+        roundtrip(&Request::LoadPlan {
+            vertices: v,
+            rings: heapless::Vec::new(),
+            openings: 0,
+        });
     }
 
     fn episode_params() -> EpisodeParams {

@@ -3,7 +3,7 @@
 //! parameters ([`EpisodeParams`]) are the episode layer's own type, whose serde form is the
 //! `StartEpisode` payload.
 
-use super::{MAX_FRAME, MAX_WIRE_VERTICES, POLICY_CHUNK, PROTOCOL_VERSION};
+use super::{MAX_FRAME, MAX_WIRE_RINGS, MAX_WIRE_VERTICES, POLICY_CHUNK, PROTOCOL_VERSION};
 use crate::episode::{Action, EpisodeParams, Observation, ObservationError, ParamError};
 use crate::policy::int8::error::BlobError;
 use crate::world::floorplan::PlanError;
@@ -28,12 +28,17 @@ pub enum Request {
         /// Echoed back.
         nonce: u32,
     },
-    /// Loads the floor-plan model (model frame, counter-clockwise `[x, y]` in metres).
-    /// Validated with [`crate::FloorPlan::from_raw`]; answered by [`Response::PlanLoaded`]
-    /// or `Error(InvalidPlan(..))`.
+    /// Loads the floor-plan model (model frame, `[x, y]` in metres): the outline
+    /// counter-clockwise, then each column clockwise, with the door openings. Validated with
+    /// [`crate::FloorPlan::from_parts`]; answered by [`Response::PlanLoaded`] or
+    /// `Error(InvalidPlan(..))`. Since protocol v10 (rings and openings).
     LoadPlan {
-        /// Outline vertices.
+        /// Every ring's vertices, concatenated (outline first).
         vertices: HVec<[f32; 2], MAX_WIRE_VERTICES>,
+        /// Exclusive end index of each ring; empty for the outline alone.
+        rings: HVec<u8, MAX_WIRE_RINGS>,
+        /// Bit `i` set: wall `i` (from vertex `i` to the next of its ring) is a door opening.
+        openings: u64,
     },
     /// Starts an episode on the loaded plan; answered by the first action request
     /// ([`Response::Act`]) or an error.

@@ -33,7 +33,7 @@ pub use framing::*;
 pub use messages::*;
 
 /// Protocol version; bumped on every incompatible change of a message or of the framing.
-pub const PROTOCOL_VERSION: u16 = 9;
+pub const PROTOCOL_VERSION: u16 = 10;
 /// The id carried by device replies to frames whose own id could not be read.
 pub const NO_ID: u16 = 0;
 /// Largest CRC-protected payload (postcard bytes + 4 CRC bytes).
@@ -45,6 +45,9 @@ pub const MAX_FRAME: usize = MAX_PAYLOAD + MAX_PAYLOAD / 254 + 2;
 /// `InvalidPlan(TooManyVertices)` rather than a decode error. Beyond this the frame
 /// exceeds [`MAX_PAYLOAD`] and is answered with `Oversized`.
 pub const MAX_WIRE_VERTICES: usize = 120;
+/// Ring capacity of a `LoadPlan` message: above [`crate::limits::MAX_RINGS`] for the same
+/// reason, so too many columns are answered with the typed `InvalidPlan(TooManyRings)`.
+pub const MAX_WIRE_RINGS: usize = 16;
 /// Largest rotation-bin count an episode may ask for.
 pub const MAX_ROT_BINS: u8 = crate::limits::MAX_ROT_BINS as u8;
 pub use crate::limits::MAX_EPISODE_ACTIONS;

@@ -68,13 +68,14 @@ pub const MAX_SYMMETRY_ORDER: usize = MAX_VERTICES;
 /// A Table-2 pose representative `(r cos θ, r sin θ, t_x, t_y)` of a model→scene transform.
 pub type PoseRepresentative = [f32; 4];
 
-/// RMS distance of the outline from its perimeter centroid with uniform density along the
-/// walls: `Λ = r = sqrt((1/L) ∫_S ‖s − c‖² ds)` (equation 10).
+/// RMS distance of the solid walls (columns included, door openings not) from their
+/// perimeter centroid with uniform density along them: `Λ = r = sqrt((1/L) ∫_S ‖s − c‖² ds)`
+/// (equation 10).
 pub fn perimeter_rms_radius(plan: &FloorPlan) -> f32 {
     let c = plan.perimeter_centroid();
     let mut acc = 0.0f32;
     let mut total = 0.0f32;
-    for i in 0..plan.len() {
+    for i in plan.solid_walls() {
         let (a, b) = plan.wall(i);
         let (a, b) = (a - c, b - c);
         let l = length(b - a);
@@ -253,7 +254,7 @@ mod tests {
             let g = core::f64::consts::TAU * k as f64 / order as f64;
             let mut acc = 0.0f64;
             let mut total = 0.0f64;
-            for i in 0..p.len() {
+            for i in p.solid_walls() {
                 let (a, b) = p.wall(i);
                 let (ax, ay, bx, by) = (a.x as f64, a.y as f64, b.x as f64, b.y as f64);
                 let l = ((bx - ax).powi(2) + (by - ay).powi(2)).sqrt();

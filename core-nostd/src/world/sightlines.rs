@@ -26,7 +26,8 @@ impl Sightlines {
     /// The viewpoint `origin` in `plan`.
     pub fn new(plan: &FloorPlan, origin: Vec2) -> Sightlines {
         let mut walls = heapless::Vec::new();
-        for i in 0..plan.len() {
+        // Solid walls only: a sight line passes through a door opening.
+        for i in plan.solid_walls() {
             let (a, b) = plan.wall(i);
             let (w, e) = (a - origin, b - a);
             // A plan has at most MAX_VERTICES walls.

@@ -21,10 +21,19 @@
 //! symmetry. Reflections are not considered (only proper symmetries matter for the pose
 //! distance, Table 2). A polygon cannot be circularly symmetric, so the `SO(2)` row of
 //! Table 2 never arises.
+//!
+//! **Columns and doors.** A symmetry must map the set of solid walls onto itself. For a plan
+//! with columns or doors the chain is the outline's alone, and a shift counts only when it
+//! also maps openings onto openings (link by link: a door breaks the symmetry of the wall
+//! it is in unless the image wall has a door in the same place) and when the rotation about
+//! the outline's centre maps every column onto a column with the same number of vertices,
+//! each vertex within `ε_ρ` times that column's shortest wall of a vertex of the image.
+//! A centred column keeps a rectangle's order 2; an off-centre one makes it 1. A plain plan
+//! (one ring, no opening) takes exactly the path it always did.
 
 use crate::world::floorplan::{FloorPlan, MAX_VERTICES};
-use crate::world::geometry::{cross, length};
-use crate::world::math::{abs, atan2, wrap_angle};
+use crate::world::geometry::{cross, length, rotate, v2, Vec2};
+use crate::world::math::{abs, atan2, wrap_angle, TAU};
 use core::f32::consts::PI;
 use heapless::Vec as HVec;
 
@@ -64,14 +73,15 @@ impl SymmetryTolerance {
     }
 }
 
-/// The edge chain of `plan`: link `i` is (interior angle at vertex `i`, length of wall `i`).
+/// The edge chain of `plan`'s outline: link `i` is (interior angle at vertex `i`, length of
+/// wall `i`), openings included (a door's jambs are links of angle π).
 pub fn edge_chain(plan: &FloorPlan) -> HVec<ChainLink, MAX_VERTICES> {
-    let n = plan.len();
+    let n = plan.ring(0).len();
     let mut chain = HVec::new();
     for i in 0..n {
-        let prev = plan.vertex(i + n - 1);
+        let prev = plan.vertex(plan.prev(i));
         let cur = plan.vertex(i);
-        let next = plan.vertex(i + 1);
+        let next = plan.vertex(plan.next(i));
         let (d0, d1) = (cur - prev, next - cur);
         // Signed turning angle (left turns positive for a counter-clockwise outline).
         let turn = atan2(cross(d0, d1), d0.x * d1.x + d0.y * d1.y);
@@ -96,12 +106,53 @@ pub fn shift_matches(chain: &[ChainLink], k: usize, tol: &SymmetryTolerance) -> 
 pub fn symmetry_order(plan: &FloorPlan, tol: &SymmetryTolerance) -> u8 {
     let chain = edge_chain(plan);
     let n = chain.len();
+    let plain = plan.is_plain();
     for k in 1..n {
-        if n % k == 0 && shift_matches(&chain, k, tol) {
+        if n % k == 0
+            && shift_matches(&chain, k, tol)
+            && (plain || (openings_match(plan, k) && columns_match(plan, n / k, tol)))
+        {
             return (n / k) as u8;
         }
     }
     1
+}
+
+/// True when the shift by `k` outline links maps every opening onto an opening.
+fn openings_match(plan: &FloorPlan, k: usize) -> bool {
+    let n = plan.ring(0).len();
+    (0..n).all(|i| plan.is_opening(i) == plan.is_opening((i + k) % n))
+}
+
+/// True when the rotation by `2π / order` about the outline's vertex mean (fixed by any
+/// rotation that maps the outline onto itself) maps every column onto a column.
+fn columns_match(plan: &FloorPlan, order: usize, tol: &SymmetryTolerance) -> bool {
+    let outline = plan.ring(0);
+    let mut c = v2(0.0, 0.0);
+    for i in outline.clone() {
+        c += plan.vertex(i);
+    }
+    let c = c / outline.len().max(1) as f32;
+    let angle = TAU / order as f32;
+    (1..plan.ring_count()).all(|r| {
+        let ring = plan.ring(r);
+        let shortest = ring
+            .clone()
+            .map(|i| {
+                let (a, b) = plan.wall(i);
+                length(b - a)
+            })
+            .fold(f32::INFINITY, f32::min);
+        let eps = tol.length * shortest;
+        (1..plan.ring_count()).any(|s| {
+            let image = plan.ring(s);
+            image.len() == ring.len()
+                && ring.clone().all(|i| {
+                    let p: Vec2 = rotate(plan.vertex(i) - c, angle) + c;
+                    image.clone().any(|j| length(plan.vertex(j) - p) <= eps)
+                })
+        })
+    })
 }
 
 #[cfg(test)]
@@ -254,5 +305,38 @@ mod tests {
             let q = FloorPlan::new(&v).unwrap();
             prop_assert_eq!(symmetry_order(&q, &tol()), expect);
         }
+    }
+
+    #[test]
+    fn columns_and_doors_break_or_keep_symmetry() {
+        let outline = [v2(0.0, 0.0), v2(6.0, 0.0), v2(6.0, 4.0), v2(0.0, 4.0)];
+        let plain = FloorPlan::new(&outline).unwrap();
+        assert_eq!(symmetry_order(&plain, &tol()), 2);
+        let sq = |x: f32, y: f32| {
+            [
+                v2(x, y),
+                v2(x + 1.0, y),
+                v2(x + 1.0, y + 1.0),
+                v2(x, y + 1.0),
+            ]
+        };
+        let build = |cols: &[&[Vec2]], doors: &[(Vec2, Vec2)]| {
+            FloorPlan::with_columns_and_doors(&outline, cols, doors, 0.02).unwrap()
+        };
+        // A centred column keeps the half turn.
+        assert_eq!(symmetry_order(&build(&[&sq(2.5, 1.5)], &[]), &tol()), 2);
+        // An off-centre one breaks it.
+        assert_eq!(symmetry_order(&build(&[&sq(3.5, 1.5)], &[]), &tol()), 1);
+        // Two columns that swap under the half turn keep it.
+        let pair = build(&[&sq(1.0, 1.0), &sq(4.0, 2.0)], &[]);
+        assert_eq!(symmetry_order(&pair, &tol()), 2);
+        // A door breaks it; a second door opposite it restores it.
+        let one = build(&[], &[(v2(1.0, 0.0), v2(2.0, 0.0))]);
+        assert_eq!(symmetry_order(&one, &tol()), 1);
+        let two = build(
+            &[],
+            &[(v2(1.0, 0.0), v2(2.0, 0.0)), (v2(5.0, 4.0), v2(4.0, 4.0))],
+        );
+        assert_eq!(symmetry_order(&two, &tol()), 2);
     }
 }

@@ -20,7 +20,15 @@ pub(super) fn compare_with_plan(
 ) {
     use activesense_core::world::geometry::unit;
     for (r, m) in a.readings.iter_mut().zip(readings) {
-        let hit = plan.ray_cast(pose.translation(), unit(pose.theta + m.bearing));
+        let dir = unit(pose.theta + m.bearing);
+        let hit = plan.ray_cast(pose.translation(), dir);
+        let wall_range = hit.map_or(f32::INFINITY, |h| h.range);
+        if crate::world::site::through_plan_door(plan, pose.translation(), dir, wall_range)
+            .is_some()
+        {
+            r.fit = ReadingFit::ThroughDoor;
+            continue;
+        }
         let Some(hit) = hit else {
             r.fit = ReadingFit::NoWall;
             continue;
@@ -39,7 +47,7 @@ pub(super) fn compare_with_plan(
     let off: Vec<&Reading> = a
         .readings
         .iter()
-        .filter(|r| r.fit != ReadingFit::Explained)
+        .filter(|r| !matches!(r.fit, ReadingFit::Explained | ReadingFit::ThroughDoor))
         .collect();
     if off.len() < MISMATCH_MIN_READINGS
         || (off.len() as f64) < MISMATCH_SHARE * a.readings.len() as f64
@@ -95,4 +103,131 @@ pub(super) fn compare_with_plan(
         a.readings.len(),
         parts.join("; ")
     ));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{AnswerInput, ReadingFit};
+    use super::*;
+    use activesense_core::world::geometry::{rotate, unit, v2};
+
+    /// A reading that hits a column of the plan is explained by the plan, and names the
+    /// column's wall; without the column the same reading would be short of the far wall.
+    #[test]
+    fn a_reading_on_a_column_is_explained() {
+        let plan = FloorPlan::with_columns_and_doors(
+            &[v2(-6.0, -4.0), v2(6.0, -4.0), v2(6.0, 4.0), v2(-6.0, 4.0)],
+            &[&[v2(2.0, -0.5), v2(3.0, -0.5), v2(3.0, 0.5), v2(2.0, 0.5)]],
+            &[],
+            0.02,
+        )
+        .unwrap()
+        .centered();
+        let pose = Pose2::new(-2.0, 0.0, 0.4);
+        // Scene bearings: the first looks along the model's +x, at the column.
+        let bearings = [-0.4f32, 1.2, 2.3, 3.0, 4.1, 5.0];
+        let readings: Vec<Measurement> = bearings
+            .iter()
+            .map(|&b| {
+                let hit = plan
+                    .ray_cast(pose.translation(), rotate(unit(b), pose.theta))
+                    .unwrap();
+                Measurement::new(b, hit.range)
+            })
+            .collect();
+        let frame = PlanFrame::default();
+        let a = Answer::new(&AnswerInput {
+            label: "column".into(),
+            plan: &plan,
+            frame: &frame,
+            pose: Some(pose),
+            refined: true,
+            readings: &readings,
+            heading_known: false,
+            symmetry_order: 1,
+            stop_risk: Some(0.004),
+            stop_tables: None,
+            truth: Some(pose),
+            hint: None,
+            range_sigma: 0.01,
+        });
+        let on_column = &a.readings[0];
+        assert_eq!(on_column.fit, ReadingFit::Explained, "{on_column:?}");
+        // Walls are numbered from 1 in the answer; the column's are 5 to 8.
+        assert!(on_column.wall.is_some_and(|w| w > 4), "{on_column:?}");
+        // The column's face, not the far wall 8 m from it.
+        assert!(readings[0].range < 4.0, "{:?}", readings[0]);
+        assert!(a.readings.iter().all(|r| r.fit == ReadingFit::Explained));
+        assert_eq!(a.mismatch, None);
+        // The plain room would not explain it.
+        let plain = crate::fixtures::rect(12.0, 8.0);
+        let b = Answer::new(&AnswerInput {
+            plan: &plain,
+            ..AnswerInput {
+                label: "rect".into(),
+                plan: &plan,
+                frame: &frame,
+                pose: Some(pose),
+                refined: true,
+                readings: &readings,
+                heading_known: false,
+                symmetry_order: 2,
+                stop_risk: Some(0.004),
+                stop_tables: None,
+                truth: Some(pose),
+                hint: None,
+                range_sigma: 0.01,
+            }
+        });
+        assert_eq!(b.readings[0].fit, ReadingFit::Short);
+    }
+
+    /// A reading through a door of the plan (a corridor 3 m long beyond it) is neither
+    /// explained nor held against the plan: two such readings do not make the room unlike
+    /// its plan, where two as long through a plain wall do.
+    #[test]
+    fn readings_through_a_door_of_the_plan_are_not_held_against_it() {
+        let outline = [v2(-6.0, -4.0), v2(6.0, -4.0), v2(6.0, 4.0), v2(-6.0, 4.0)];
+        let door = (v2(6.0, -1.0), v2(6.0, 1.0));
+        let plan = FloorPlan::with_columns_and_doors(&outline, &[], &[door], 0.02).unwrap();
+        let plain = FloorPlan::new(&outline).unwrap();
+        let pose = Pose2::new(0.0, 0.0, 0.0);
+        let bearings = [-0.1f32, 0.1, 1.2, 2.3, 3.0, 4.1, 5.0];
+        let readings: Vec<Measurement> = bearings
+            .iter()
+            .map(|&b| {
+                let r = plain.ray_cast(pose.translation(), unit(b)).unwrap().range;
+                // Through the door (x = 6, |y| < 1): the corridor's far wall 3 m beyond.
+                let through = b.abs() < 0.15;
+                Measurement::new(b, if through { r + 3.0 } else { r })
+            })
+            .collect();
+        let frame = PlanFrame::default();
+        let input = |plan| AnswerInput {
+            label: "door".into(),
+            plan,
+            frame: &frame,
+            pose: Some(pose),
+            refined: true,
+            readings: &readings,
+            heading_known: false,
+            symmetry_order: 1,
+            stop_risk: Some(0.004),
+            stop_tables: None,
+            truth: Some(pose),
+            hint: None,
+            range_sigma: 0.01,
+        };
+        let a = Answer::new(&input(&plan));
+        assert_eq!(a.readings[0].fit, ReadingFit::ThroughDoor);
+        assert_eq!(a.readings[1].fit, ReadingFit::ThroughDoor);
+        assert!(a.readings[2..]
+            .iter()
+            .all(|r| r.fit == ReadingFit::Explained));
+        assert_eq!(a.mismatch, None);
+        assert!(!a.to_text().contains("does not explain"), "{}", a.to_text());
+        let b = Answer::new(&input(&plain));
+        assert_eq!(b.readings[0].fit, ReadingFit::Long);
+        assert!(b.mismatch.is_some());
+    }
 }

@@ -153,6 +153,9 @@ pub enum ReadingFit {
     Long,
     /// The plan predicts no wall along this bearing from the answer.
     NoWall,
+    /// Through a door of the plan: no wall is drawn there, whatever lies beyond reads as
+    /// it may; not counted against the plan.
+    ThroughDoor,
 }
 
 /// Share of readings that, once not explained by the plan at the answer, makes the answer

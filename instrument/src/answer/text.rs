@@ -89,7 +89,7 @@ impl Answer {
         let off: Vec<_> = self
             .readings
             .iter()
-            .filter(|r| r.fit != ReadingFit::Explained)
+            .filter(|r| !matches!(r.fit, ReadingFit::Explained | ReadingFit::ThroughDoor))
             .collect();
         if !off.is_empty() {
             let _ = writeln!(s, "  readings the plan does not explain at the answer:");

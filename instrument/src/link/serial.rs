@@ -324,13 +324,30 @@ impl<T: Read + Write> Client<T> {
         Ok(info)
     }
 
-    /// Loads a plan (checked locally for size first).
+    /// Loads a plan, its columns and doors included (checked locally for size first).
     pub fn load_plan(&mut self, plan: &FloorPlan) -> LinkResult<PlanSummary> {
-        self.load_raw_plan(plan.raw())
+        self.load_plan_parts(plan.raw(), plan.ring_ends(), plan.openings())
     }
 
-    /// Loads raw vertices (the device validates them).
+    /// Loads raw vertices of one ring without openings (the device validates them).
     pub fn load_raw_plan(&mut self, vertices: &[[f32; 2]]) -> LinkResult<PlanSummary> {
+        self.load_plan_parts(vertices, &[], 0)
+    }
+
+    /// Loads the wire form of a plan: every ring's vertices, the ring ends and the
+    /// openings mask (the device validates them).
+    pub fn load_plan_parts(
+        &mut self,
+        vertices: &[[f32; 2]],
+        rings: &[u8],
+        openings: u64,
+    ) -> LinkResult<PlanSummary> {
+        let rings: HVec<u8, MAX_WIRE_RINGS> = HVec::from_slice(rings).map_err(|_| {
+            LinkError::Local(format!(
+                "plan has {} rings; the protocol carries at most {MAX_WIRE_RINGS}",
+                rings.len()
+            ))
+        })?;
         let vertices: HVec<[f32; 2], MAX_WIRE_VERTICES> =
             HVec::from_slice(vertices).map_err(|_| {
                 LinkError::Local(format!(
@@ -339,7 +356,11 @@ impl<T: Read + Write> Client<T> {
                     vertices.len()
                 ))
             })?;
-        match self.call(&Request::LoadPlan { vertices })? {
+        match self.call(&Request::LoadPlan {
+            vertices,
+            rings,
+            openings,
+        })? {
             Response::PlanLoaded(s) => Ok(s),
             other => Err(LinkError::Unexpected(format!("{other:?}"))),
         }

@@ -62,19 +62,37 @@ pub fn render(plan: &FloorPlan, scene: &Scene) -> String {
         xml(&scene.title)
     );
 
-    // Outline.
-    let pts: Vec<String> = plan
-        .vertices()
-        .map(|v| {
-            let (x, y) = f.px(v);
-            format!("{x:.1},{y:.1}")
-        })
-        .collect();
+    // Outline, then the columns (walls around an unfilled hole), then the doors (the wall
+    // blanked out, a dashed line across the gap).
+    let ring_points = |r: usize| -> String {
+        plan.ring(r)
+            .map(|i| {
+                let (x, y) = f.px(plan.vertex(i));
+                format!("{x:.1},{y:.1}")
+            })
+            .collect::<Vec<String>>()
+            .join(" ")
+    };
     let _ = writeln!(
         s,
         r##"<polygon points="{}" fill="#f4f1ea" stroke="#222" stroke-width="3"/>"##,
-        pts.join(" ")
+        ring_points(0)
     );
+    for r in 1..plan.ring_count() {
+        let _ = writeln!(
+            s,
+            r##"<polygon points="{}" fill="#ffffff" stroke="#222" stroke-width="3"/>"##,
+            ring_points(r)
+        );
+    }
+    for i in (0..plan.len()).filter(|&i| plan.is_opening(i)) {
+        let (a, b) = plan.wall(i);
+        let ((x0, y0), (x1, y1)) = (f.px(a), f.px(b));
+        let _ = writeln!(
+            s,
+            r##"<line x1="{x0:.1}" y1="{y0:.1}" x2="{x1:.1}" y2="{y1:.1}" stroke="#ffffff" stroke-width="5"/><line x1="{x0:.1}" y1="{y0:.1}" x2="{x1:.1}" y2="{y1:.1}" stroke="#222" stroke-width="1.5" stroke-dasharray="4 3"/>"##
+        );
+    }
     for i in 0..plan.len() {
         let (a, b) = plan.wall(i);
         let mid = (a + b) * 0.5 + plan.outward_normal(i) * (14.0 / scale);

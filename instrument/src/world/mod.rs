@@ -39,11 +39,18 @@ pub struct Placement {
 
 /// Computes the visual centre of `plan` (polylabel, 1 cm tolerance) and the placement radius.
 pub fn placement(plan: &FloorPlan) -> Placement {
-    let ring: Vec<geo_types::Coord<f64>> = plan
-        .vertices()
-        .map(|p| geo_types::coord! { x: p.x as f64, y: p.y as f64 })
-        .collect();
-    let poly = geo_types::Polygon::new(geo_types::LineString::new(ring), vec![]);
+    // The outline with the columns as holes: the visual centre is never inside a column.
+    let ring = |r: usize| -> geo_types::LineString<f64> {
+        plan.ring(r)
+            .map(|i| {
+                let p = plan.vertex(i);
+                geo_types::coord! { x: p.x as f64, y: p.y as f64 }
+            })
+            .collect::<Vec<_>>()
+            .into()
+    };
+    let holes = (1..plan.ring_count()).map(ring).collect();
+    let poly = geo_types::Polygon::new(ring(0), holes);
     let c = polylabel::polylabel(&poly, &0.01)
         .map(|p| v2(p.x() as f32, p.y() as f32))
         .unwrap_or_else(|_| plan.perimeter_centroid());

@@ -191,7 +191,10 @@ fn accept(verts: &[Vec2]) -> Option<FloorPlan> {
     // the visual centre below 0.75 m (checked cheaply via the minimum edge length here and
     // precisely by the world when it places the agent).
     let min_edge = (0..plan.len())
-        .map(|i| activesense_core::world::geometry::length(plan.vertex(i + 1) - plan.vertex(i)))
+        .map(|i| {
+            let (a, b) = plan.wall(i);
+            activesense_core::world::geometry::length(b - a)
+        })
         .fold(f32::INFINITY, f32::min);
     if min_edge < 0.3 {
         return None;

@@ -128,7 +128,19 @@ impl SensorModel {
             Ok(noise) => noise,
             Err(outlier) => return outlier,
         };
-        match plan.ray_cast(origin, unit(angle)) {
+        let hit = plan.ray_cast(origin, unit(angle));
+        // Through a door of the plan, the beam meets the wall behind it.
+        let wall_range = hit.map_or(f32::INFINITY, |h| h.range);
+        if let Some((range, incidence)) =
+            crate::world::site::through_plan_door(plan, origin, unit(angle), wall_range)
+        {
+            return if range <= self.max_range && incidence <= self.max_incidence {
+                (Some((range + noise).max(0.0)), RangeKind::Behind)
+            } else {
+                (None, RangeKind::NoReturn)
+            };
+        }
+        match hit {
             Some(hit) if hit.range <= self.max_range && hit.incidence <= self.max_incidence => {
                 (Some((hit.range + noise).max(0.0)), RangeKind::Hit)
             }

@@ -253,6 +253,10 @@ impl Site {
                 };
             }
         }
+        if let Some((range, incidence)) = through_plan_door(&self.as_built, origin, dir, wall_range)
+        {
+            return SiteHit::Behind { range, incidence };
+        }
         let Some(hit) = wall else {
             return SiteHit::Nothing;
         };
@@ -275,6 +279,46 @@ impl Site {
             incidence: hit.incidence,
         }
     }
+}
+
+/// How deep the space behind a door of the plan is (m): a beam through a plan door meets a
+/// wall this far behind the door's line (along the door's normal), as in a corridor or the
+/// next room. One fixed depth: the plan does not draw what lies behind its doors.
+pub const PLAN_DOOR_DEPTH: f32 = 2.5;
+
+/// The beam from `origin` along unit `dir` leaving through a door opening of `plan` before
+/// `wall_range`: the range at which it meets the wall [`PLAN_DOOR_DEPTH`] behind the door
+/// and its incidence there (taken as at the door), or `None` (always for a plan without
+/// doors, which then reads exactly what it always read).
+pub fn through_plan_door(
+    plan: &FloorPlan,
+    origin: Vec2,
+    dir: Vec2,
+    wall_range: f32,
+) -> Option<(f32, f32)> {
+    if plan.openings() == 0 {
+        return None;
+    }
+    let mut best: Option<(f32, usize)> = None;
+    for i in (0..plan.len()).filter(|&i| plan.is_opening(i)) {
+        let (a, b) = plan.wall(i);
+        let e = b - a;
+        let denom = cross(dir, e);
+        if abs(denom) < 1e-12 {
+            continue;
+        }
+        let w = a - origin;
+        let t = cross(w, e) / denom;
+        let u = cross(w, dir) / denom;
+        if t > 1e-6 && t < wall_range && (0.0..=1.0).contains(&u) && best.is_none_or(|(h, _)| t < h)
+        {
+            best = Some((t, i));
+        }
+    }
+    let (t, i) = best?;
+    let n = plan.outward_normal(i);
+    let incidence = acos(abs(dir.x * n.x + dir.y * n.y).min(1.0));
+    Some((t + PLAN_DOOR_DEPTH / cos(incidence).max(0.2), incidence))
 }
 
 /// First crossing of the ray with a convex polygon's edges: range and incidence.
@@ -337,6 +381,9 @@ fn fits(plan: &FloorPlan, corners: &[[f32; 2]], station: Vec2, wall_clearance: f
 fn furniture(plan: &FloorPlan, station: Vec2, rng: &mut Pcg32) -> Option<Obstacle> {
     for _ in 0..20 {
         let i = rng.gen_range(0..plan.len());
+        if plan.is_opening(i) {
+            continue; // no furniture against a door
+        }
         let (a, b) = plan.wall(i);
         let len = (b - a).norm();
         let width = rng.gen_range(0.6f32..2.0);
@@ -395,6 +442,10 @@ fn free_standing(
 fn opening(plan: &FloorPlan, lo: f32, hi: f32, rng: &mut Pcg32) -> Option<Opening> {
     for _ in 0..20 {
         let i = rng.gen_range(0..plan.len());
+        // A site opening is a stretch of solid outline wall (glass, a door the plan lacks).
+        if plan.is_opening(i) || !plan.ring(0).contains(&i) {
+            continue;
+        }
         let (a, b) = plan.wall(i);
         let len = (b - a).norm();
         let width = rng.gen_range(lo..hi);
@@ -413,14 +464,19 @@ fn opening(plan: &FloorPlan, lo: f32, hi: f32, rng: &mut Pcg32) -> Option<Openin
 }
 
 /// The plan with wall `i` moved by `offset` m along its outward normal (both its corners
-/// move; the neighbouring walls tilt a little), if that is still a valid plan.
+/// move; the neighbouring walls tilt a little), if that is still a valid plan; its columns
+/// and doors are kept (a door opening is not moved).
 fn move_wall(plan: &FloorPlan, i: usize, offset: f32) -> Option<FloorPlan> {
+    if plan.is_opening(i) {
+        return None;
+    }
     let n = plan.outward_normal(i) * offset;
-    let j = (i + 1) % plan.len();
-    let mut vs: Vec<Vec2> = plan.vertices().collect();
-    vs[i] += n;
-    vs[j] += n;
-    FloorPlan::new(&vs).ok()
+    let j = plan.next(i);
+    let mut vs: Vec<[f32; 2]> = plan.raw().to_vec();
+    for k in [i, j] {
+        vs[k] = [vs[k][0] + n.x, vs[k][1] + n.y];
+    }
+    FloorPlan::from_parts(&vs, plan.ring_ends(), plan.openings()).ok()
 }
 
 #[cfg(test)]
@@ -549,5 +605,55 @@ mod tests {
         site.people = 0.5;
         let p = site.cast(v2(0.0, 2.0), v2(1.0, 0.0), (0.1, 0.5));
         assert!(matches!(p, SiteHit::Clutter { range, .. } if range > 0.5 && range < 5.0));
+    }
+
+    /// A plan door is an opening onto space behind it: the beam through it meets a wall
+    /// [`PLAN_DOOR_DEPTH`] behind the door's line, beside it the wall itself; a plan column
+    /// is a wall the beam meets; a wall moved on site keeps the plan's column and door.
+    #[test]
+    fn plan_doors_open_onto_space_behind_and_columns_stop_the_beam() {
+        let plan = FloorPlan::with_columns_and_doors(
+            &[v2(0.0, 0.0), v2(6.0, 0.0), v2(6.0, 4.0), v2(0.0, 4.0)],
+            &[&[v2(4.0, 1.5), v2(4.5, 1.5), v2(4.5, 2.0), v2(4.0, 2.0)]],
+            &[(v2(1.0, 0.0), v2(2.0, 0.0))],
+            0.02,
+        )
+        .unwrap();
+        let site = Site::plain(&plan);
+        let down = v2(0.0, -1.0);
+        match site.cast(v2(1.5, 2.0), down, (1.0, 0.0)) {
+            SiteHit::Behind { range, incidence } => {
+                assert!((range - (2.0 + PLAN_DOOR_DEPTH)).abs() < 1e-4, "{range}");
+                assert!(incidence.abs() < 1e-3);
+            }
+            other => panic!("{other:?}"),
+        }
+        assert!(matches!(
+            site.cast(v2(2.5, 2.0), down, (1.0, 0.0)),
+            SiteHit::Wall { range, .. } if (range - 2.0).abs() < 1e-4
+        ));
+        assert!(matches!(
+            site.cast(v2(1.0, 1.75), v2(1.0, 0.0), (1.0, 0.0)),
+            SiteHit::Wall { range, .. } if (range - 3.0).abs() < 1e-4
+        ));
+        // The sensor reads the same through the plan alone.
+        let sensor = crate::world::sensor::SensorModel {
+            outlier_prob: 0.0,
+            sigma: 0.0,
+            ..Default::default()
+        };
+        let mut rng = Pcg32::seed_from_u64(1);
+        let (range, kind) =
+            sensor.measure(&plan, v2(1.5, 2.0), -core::f32::consts::FRAC_PI_2, &mut rng);
+        assert_eq!(kind, crate::world::sensor::RangeKind::Behind);
+        assert!((range.unwrap() - (2.0 + PLAN_DOOR_DEPTH)).abs() < 1e-4);
+        let moved = move_wall(&plan, 3, 0.05).unwrap();
+        assert_eq!(moved.ring_ends(), plan.ring_ends());
+        assert_eq!(moved.openings(), plan.openings());
+        assert_eq!(
+            move_wall(&plan, 1, 0.05),
+            None,
+            "a door opening is not moved"
+        );
     }
 }

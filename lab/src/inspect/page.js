@@ -66,6 +66,45 @@ window.addEventListener("error", function (e) {
     pts.forEach(function (p, i) { if (i === 0) ctx.moveTo(p[0], p[1]); else ctx.lineTo(p[0], p[1]); });
     ctx.closePath();
   }
+  // A plan's rings (the outline, then its columns): `rings` holds each ring's end index,
+  // absent for a plan of one ring. Wall i runs from vertex i to the next of its ring.
+  function ringEnds(plan) {
+    return plan.rings && plan.rings.length ? plan.rings : [plan.vertices.length];
+  }
+  function nextOf(plan, i) {
+    var ends = ringEnds(plan), s = 0;
+    for (var k = 0; k < ends.length; k++) {
+      if (i < ends[k]) return i + 1 < ends[k] ? i + 1 : s;
+      s = ends[k];
+    }
+    return 0;
+  }
+  function planPath(ctx, plan, P) {
+    var s = 0;
+    ctx.beginPath();
+    ringEnds(plan).forEach(function (e) {
+      plan.vertices.slice(s, e).forEach(function (v, i) {
+        var p = P(v[0], v[1]);
+        if (i === 0) ctx.moveTo(p[0], p[1]); else ctx.lineTo(p[0], p[1]);
+      });
+      ctx.closePath();
+      s = e;
+    });
+  }
+  // Door openings (bit i of `openings`: wall i is a door), drawn as a dashed gap.
+  function drawDoors(ctx, plan, P) {
+    var o = plan.openings || 0;
+    for (var i = 0; i < plan.vertices.length && o > 0; i++) {
+      if (Math.floor(o / Math.pow(2, i)) % 2 !== 1) continue;
+      var a = plan.vertices[i], b = plan.vertices[nextOf(plan, i)];
+      var p0 = P(a[0], a[1]), p1 = P(b[0], b[1]);
+      ctx.strokeStyle = "#ffffff"; ctx.lineWidth = 4; ctx.setLineDash([]);
+      ctx.beginPath(); ctx.moveTo(p0[0], p0[1]); ctx.lineTo(p1[0], p1[1]); ctx.stroke();
+      ctx.strokeStyle = "#222"; ctx.lineWidth = 1; ctx.setLineDash([4, 3]);
+      ctx.beginPath(); ctx.moveTo(p0[0], p0[1]); ctx.lineTo(p1[0], p1[1]); ctx.stroke();
+      ctx.setLineDash([]);
+    }
+  }
   function drawPose(ctx, P, pose, colour, r) {
     var c = P(pose.x, pose.y);
     ctx.fillStyle = colour; ctx.strokeStyle = colour; ctx.lineWidth = 2;
@@ -78,8 +117,9 @@ window.addEventListener("error", function (e) {
     var P = roomFrame(cv);
     ctx.clearRect(0, 0, cv.width, cv.height);
     ctx.fillStyle = "#f3f3f3";
-    poly(ctx, T.plan.vertices.map(function (v) { return P(v[0], v[1]); }));
-    ctx.fill(); ctx.strokeStyle = "#222"; ctx.lineWidth = 2; ctx.stroke();
+    planPath(ctx, T.plan, P);
+    ctx.fill("evenodd"); ctx.strokeStyle = "#222"; ctx.lineWidth = 2; ctx.stroke();
+    drawDoors(ctx, T.plan, P);
     // the site: what stands in the room that the plan does not draw (--site), in violet
     var site = T.site;
     if (site) {
@@ -88,9 +128,9 @@ window.addEventListener("error", function (e) {
         poly(ctx, o.corners.map(function (v) { return P(v[0], v[1]); }));
         ctx.fill(); ctx.stroke();
       });
-      var wv = site.as_built.vertices, nv = wv.length;
+      var wv = site.as_built.vertices;
       (site.openings || []).forEach(function (o) {
-        var a0 = wv[o.wall], b0 = wv[(o.wall + 1) % nv];
+        var a0 = wv[o.wall], b0 = wv[nextOf(site.as_built, o.wall)];
         var p0 = P(a0[0] + (b0[0] - a0[0]) * o.from, a0[1] + (b0[1] - a0[1]) * o.from);
         var p1 = P(a0[0] + (b0[0] - a0[0]) * o.to, a0[1] + (b0[1] - a0[1]) * o.to);
         ctx.setLineDash(o.depth_behind === null || o.depth_behind === undefined ? [3, 3] : []);
@@ -174,7 +214,7 @@ window.addEventListener("error", function (e) {
     var C = function (mx, my) {
       return [(mx - G.origin[0]) / G.cell[0] * cell, cv.height - (my - G.origin[1]) / G.cell[1] * cell];
     };
-    poly(ctx, T.plan.vertices.map(function (v) { return C(v[0], v[1]); }));
+    planPath(ctx, T.plan, C);
     ctx.strokeStyle = "rgba(0,0,0,0.8)"; ctx.lineWidth = 3.5; ctx.stroke();
     ctx.strokeStyle = "rgba(255,255,255,0.95)"; ctx.lineWidth = 1.5; ctx.stroke();
     ctx.strokeStyle = "rgba(255,255,255,0.35)"; ctx.lineWidth = 1;

@@ -35,7 +35,8 @@ pub(super) fn correspond(
     let mut feasible = [(0.0f32, v2(0.0, 0.0), 0u8); MAX_VERTICES];
     let mut nf = 0usize;
     let cos2 = cos_max * cos_max;
-    for i in 0..n {
+    // Solid walls only: no reading pairs with a door opening.
+    for i in (0..n).filter(|&i| !plan.is_opening(i)) {
         let (a, b) = plan.wall(i);
         let e = b - a;
         // d · (outward normal × |e|), the normal being `e` turned right.
@@ -73,7 +74,7 @@ pub(super) fn correspond(
         tried |= 1u64 << k;
     }
     let mut any: Option<(Vec2, f32)> = None;
-    for i in 0..n {
+    for i in (0..n).filter(|&i| !plan.is_opening(i)) {
         let (a, b) = plan.wall(i);
         let q = closest_on_segment(p, a, b);
         let r = p - q;

@@ -100,7 +100,8 @@ pub fn check(plan: &FloorPlan) -> Result<Vec<String>, String> {
     }
     // Narrow parts: along each wall, the room's width along the inward normal.
     let mut narrow: Vec<(usize, f32)> = Vec::new();
-    for i in 0..plan.len() {
+    // Solid walls only: across a door opening there is no wall to stand against.
+    for i in plan.solid_walls() {
         let (a, b) = plan.wall(i);
         let n = -plan.outward_normal(i);
         let len = (b - a).norm();

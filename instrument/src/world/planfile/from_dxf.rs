@@ -1,7 +1,35 @@
 //! The DXF reader of [`super`]: closed `LWPOLYLINE` / `POLYLINE` entities on the chosen
-//! layer, units from `$INSUNITS` (arc segments refused).
+//! layer, units from `$INSUNITS` (arc segments refused). Layers whose name contains
+//! `COLUMN` (any case) hold columns (closed polylines, each given to the room around it) and
+//! layers whose name contains `DOOR` hold doors (`LINE`s and two-vertex polylines); neither
+//! kind of layer is ever taken for the room outlines.
 
 use super::*;
+
+/// A layer of columns: its name contains `COLUMN` (any case).
+fn is_column_layer(layer: &str) -> bool {
+    layer.to_ascii_uppercase().contains("COLUMN")
+}
+
+/// A layer of doors: its name contains `DOOR` (any case).
+fn is_door_layer(layer: &str) -> bool {
+    layer.to_ascii_uppercase().contains("DOOR")
+}
+
+/// Crossing-number point-in-polygon in file coordinates (which room a column stands in).
+fn inside(ring: &[[f64; 2]], p: [f64; 2]) -> bool {
+    let n = ring.len();
+    let mut c = false;
+    for k in 0..n {
+        let (a, b) = (ring[k], ring[(k + 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1])
+            && p[0] < a[0] + (p[1] - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
+        {
+            c = !c;
+        }
+    }
+    c
+}
 
 /// Metres per unit of a DXF `$INSUNITS` value we can convert, with its name.
 fn dxf_units(u: dxf::enums::Units) -> Option<Option<(f64, &'static str)>> {
@@ -19,7 +47,7 @@ fn dxf_units(u: dxf::enums::Units) -> Option<Option<(f64, &'static str)>> {
     })
 }
 
-type DxfRooms = (Vec<RawRoom>, Option<(f64, &'static str)>);
+type DxfRooms = (Vec<RawRoom>, Vec<RawDoor>, Option<(f64, &'static str)>);
 
 pub(super) fn dxf_rooms(path: &Path, opts: &LoadOptions) -> Result<DxfRooms, PlanFileError> {
     use dxf::entities::EntityType;
@@ -59,10 +87,16 @@ pub(super) fn dxf_rooms(path: &Path, opts: &LoadOptions) -> Result<DxfRooms, Pla
         mesh: bool,
     }
     let mut polys = Vec::new();
+    let mut doors = Vec::new();
     for ent in drawing.entities() {
         let layer = ent.common.layer.clone();
         let handle = ent.common.handle.0;
         match &ent.specific {
+            EntityType::Line(l) if is_door_layer(&layer) => doors.push(RawDoor {
+                label: format!("door LINE {handle:X} on layer '{layer}'"),
+                ends: [[l.p1.x, l.p1.y], [l.p2.x, l.p2.y]],
+                room: None,
+            }),
             EntityType::LwPolyline(p) => {
                 let vertices: Vec<[f64; 2]> = p.vertices.iter().map(|v| [v.x, v.y]).collect();
                 let closed =
@@ -95,6 +129,41 @@ pub(super) fn dxf_rooms(path: &Path, opts: &LoadOptions) -> Result<DxfRooms, Pla
         }
     }
     let polys: Vec<Poly> = polys.into_iter().filter(|p| !p.mesh).collect();
+    // Columns and doors drawn as polylines, kept apart from the outlines.
+    let (features, polys): (Vec<Poly>, Vec<Poly>) = polys
+        .into_iter()
+        .partition(|p| is_column_layer(&p.layer) || is_door_layer(&p.layer));
+    let mut columns: Vec<&Poly> = Vec::new();
+    for p in &features {
+        if is_door_layer(&p.layer) && p.vertices.len() == 2 && !p.closed {
+            doors.push(RawDoor {
+                label: format!("door {}", p.label),
+                ends: [p.vertices[0], p.vertices[1]],
+                room: None,
+            });
+        } else if is_column_layer(&p.layer) && p.closed {
+            if let Some(k) = p.bulge {
+                return Err(err(
+                    path,
+                    None,
+                    format!(
+                        "{}: vertex {k} starts an arc (bulge); arcs are not supported, replace them by straight segments",
+                        p.label
+                    ),
+                ));
+            }
+            columns.push(p);
+        } else {
+            return Err(err(
+                path,
+                None,
+                format!(
+                    "{} is neither a column (a closed polyline on a COLUMN layer) nor a door (a LINE or a two-vertex polyline on a DOOR layer)",
+                    p.label
+                ),
+            ));
+        }
+    }
     if polys.is_empty() {
         return Err(err(
             path,
@@ -179,8 +248,23 @@ pub(super) fn dxf_rooms(path: &Path, opts: &LoadOptions) -> Result<DxfRooms, Pla
         rooms.push(RawRoom {
             name: (on_layer.len() > 1).then(|| i.to_string()),
             vertices: p.vertices.clone(),
+            columns: Vec::new(),
             warnings: Vec::new(),
         });
     }
-    Ok((rooms, units))
+    // Each column belongs to the room its first vertex stands in.
+    for c in columns {
+        let first = c.vertices.first().copied().unwrap_or([f64::NAN; 2]);
+        match rooms.iter_mut().find(|r| inside(&r.vertices, first)) {
+            Some(r) => r.columns.push(c.vertices.clone()),
+            None => {
+                return Err(err(
+                    path,
+                    None,
+                    format!("column {} stands in no room", c.label),
+                ))
+            }
+        }
+    }
+    Ok((rooms, doors, units))
 }

@@ -4,11 +4,20 @@
 //! Formats (`docs/PLANS.md`):
 //! - **our JSON** `{"vertices": [[x, y], ...]}` (optional `"name"`), metres;
 //! - **GeoJSON** a `Polygon`, a `Feature` with a Polygon geometry, or a `FeatureCollection`
-//!   of them (one room per feature); the outer ring is the room, holes are ignored with a
-//!   warning; coordinates are metres in a projected frame (longitude / latitude is refused);
+//!   of them (one room per feature); the outer ring is the room, inner rings are its
+//!   columns; `LineString` features with `"kind": "door"` (or IMDF `"feature_type":
+//!   "opening"`) are doors; coordinates are metres in a projected frame (longitude /
+//!   latitude is refused);
 //! - **DXF** closed `LWPOLYLINE` / `POLYLINE` entities (closed flag, or first vertex equal to
-//!   the last) on the layer named by `--layer`, or on the only layer that holds any; units
-//!   from `$INSUNITS` when set (unitless = metres). Arc segments (bulges) are refused.
+//!   the last) on the layer named by `--layer`, or on the only layer that holds any (layers
+//!   named `*COLUMN*` and `*DOOR*` aside); closed polylines on a `*COLUMN*` layer are
+//!   columns of the room around them, `LINE`s and two-vertex polylines on a `*DOOR*` layer
+//!   are doors; units from `$INSUNITS` when set (unitless = metres). Arc segments (bulges)
+//!   are refused.
+//!
+//! A door belongs to every room whose outline it lies on within [`DOOR_TOLERANCE`] (a door
+//! may name its room with a `"room"` property, as `--room` names one); columns and doors go
+//! through the same shift and scale as the outline ([`features`]).
 //!
 //! `--units mm|cm|m` overrides the file's units. A `.json` file is GeoJSON when its top-level
 //! object has a `"type"` member. The closing vertex of a ring (equal to the first) is
@@ -20,8 +29,12 @@
 //! centres what they (and our JSON reader) return.
 
 mod admissible;
+mod features;
 mod from_dxf;
 mod from_geojson;
+
+pub use features::DOOR_TOLERANCE;
+use features::{with_features, RawDoor};
 
 use activesense_core::episode::AgentKind;
 use activesense_core::episode::Termination;
@@ -294,10 +307,11 @@ fn format_of(path: &Path) -> Option<Format> {
 }
 
 /// One outline as read from a file, before validation: its name inside a multi-room file,
-/// vertices in file units, warnings.
+/// vertices in file units, its columns (file units), warnings.
 struct RawRoom {
     name: Option<String>,
     vertices: Vec<[f64; 2]>,
+    columns: Vec<Vec<[f64; 2]>>,
     warnings: Vec<String>,
 }
 
@@ -310,19 +324,19 @@ pub fn load_rooms(path: &Path, opts: &LoadOptions) -> Result<Vec<LoadedPlan>, Pl
             "unknown plan format (expected .json, .geojson or .dxf)",
         )
     })?;
-    let (rooms, file_units) = match format {
+    let (rooms, doors, file_units) = match format {
         Format::Json | Format::GeoJson => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| err(path, None, format!("cannot read: {e}")))?;
             let value: serde_json::Value = serde_json::from_str(&text)
                 .map_err(|e| err(path, None, format!("not valid JSON: {e}")))?;
             let geo = format == Format::GeoJson || value.get("type").is_some();
-            let rooms = if geo {
+            let (rooms, doors) = if geo {
                 geojson_rooms(path, &value)?
             } else {
-                vec![our_json_room(path, &value)?]
+                (vec![our_json_room(path, &value)?], Vec::new())
             };
-            (rooms, None)
+            (rooms, doors, None)
         }
         Format::Dxf => dxf_rooms(path, opts)?,
     };
@@ -338,10 +352,24 @@ pub fn load_rooms(path: &Path, opts: &LoadOptions) -> Result<Vec<LoadedPlan>, Pl
         .unwrap_or_else(|| path.display().to_string());
     let many = rooms.len() > 1;
     let mut out = Vec::with_capacity(rooms.len());
+    let mut door_used = vec![false; doors.len()];
     for (i, raw) in rooms.into_iter().enumerate() {
         let label = raw.name.clone().unwrap_or_else(|| format!("room {i}"));
         let room = many.then(|| label.clone());
-        let (plan, frame, remarks) = validate(path, room.clone(), &raw.vertices, scale, unit_name)?;
+        // The doors that may be this room's: those naming it, and those naming no room.
+        let candidates: Vec<usize> = (0..doors.len())
+            .filter(|&d| {
+                doors[d].room.as_ref().is_none_or(|r| {
+                    raw.name.as_deref() == Some(r.as_str()) || r.parse::<usize>() == Ok(i)
+                })
+            })
+            .collect();
+        let cand: Vec<&RawDoor> = candidates.iter().map(|&d| &doors[d]).collect();
+        let (plan, frame, remarks, used) =
+            validate(path, room.clone(), &raw, &cand, scale, unit_name)?;
+        for (k, &d) in candidates.iter().enumerate() {
+            door_used[d] |= used.get(k).copied().unwrap_or(false);
+        }
         let name = if many {
             format!(
                 "{stem}#{}",
@@ -357,6 +385,17 @@ pub fn load_rooms(path: &Path, opts: &LoadOptions) -> Result<Vec<LoadedPlan>, Pl
             plan: NamedPlan { name, plan, frame },
             warnings,
         });
+    }
+    if let Some(d) = door_used.iter().position(|u| !u) {
+        return Err(err(
+            path,
+            None,
+            format!(
+                "{} lies on no room's outline (within {} cm)",
+                doors[d].label,
+                DOOR_TOLERANCE * 100.0
+            ),
+        ));
     }
     Ok(out)
 }
@@ -443,19 +482,24 @@ pub fn load_plans_from(
     (good, bad)
 }
 
-/// Scales, de-duplicates the closing vertex, orients and validates one outline, and checks
-/// that the instrument can localize in it ([`admissible`]); returns the plan, where its
-/// model frame lies in the file's coordinates, and the admissibility warnings. Errors name
-/// vertices by their index in the file (0-based) and their coordinates.
+/// What [`validate`] returns: the plan, where its model frame lies in the file's
+/// coordinates, the admissibility warnings, and which candidate doors lie on the room.
+type Validated = (FloorPlan, PlanFrame, Vec<String>, Vec<bool>);
+
+/// Scales, de-duplicates the closing vertex, orients and validates one outline, adds its
+/// columns and the candidate doors lying on it ([`features`]), and checks that the
+/// instrument can localize in it ([`admissible`]). Errors name outline vertices by their
+/// index in the file (0-based) and their coordinates.
 fn validate(
     path: &Path,
     room: Option<String>,
-    vertices: &[[f64; 2]],
+    raw: &RawRoom,
+    doors: &[&RawDoor],
     scale: f64,
     unit_name: &str,
-) -> Result<(FloorPlan, PlanFrame, Vec<String>), PlanFileError> {
+) -> Result<Validated, PlanFileError> {
     let e = |reason: String| err(path, room.clone(), reason);
-    let mut v: Vec<[f64; 2]> = vertices.to_vec();
+    let mut v: Vec<[f64; 2]> = raw.vertices.to_vec();
     if v.len() >= 2 && v.first() == v.last() {
         v.pop();
     }
@@ -517,14 +561,7 @@ fn validate(
         let (a, b) = (fv(k), order[(k as usize + 1) % n]);
         format!("edge {a}–{b} {} → {}", coords(a), coords(b))
     };
-    // The perimeter centroid `centered` subtracts, kept for the answer's frame.
-    let mut centroid = [0.0f64; 2];
-    FloorPlan::new(&pts)
-        .map(|p| {
-            let c = p.perimeter_centroid();
-            centroid = [c.x as f64, c.y as f64];
-            p.centered()
-        })
+    let outline = FloorPlan::new(&pts)
         .map_err(|pe| {
             e(match pe {
                 PlanError::TooFewVertices | PlanError::TooManyVertices => pe.to_string(),
@@ -562,19 +599,27 @@ fn validate(
                     edge(b)
                 ),
                 PlanError::Clockwise => "the outline has zero area".to_string(),
+                other => other.to_string(),
             })
-        })
-        .and_then(|plan| {
-            fits_pipeline(&plan).map_err(e)?;
-            let remarks = admissible::check(&plan).map_err(e)?;
-            let frame = PlanFrame {
-                unit: unit_name.to_string(),
-                scale,
-                bbox_centre: [cx, cy],
-                centroid,
-            };
-            Ok((plan, frame, remarks))
-        })
+        })?;
+    let (plan, used) = if raw.columns.is_empty() && doors.is_empty() {
+        (outline, Vec::new())
+    } else {
+        with_features(&pts, &raw.columns, doors, [cx, cy], scale).map_err(e)?
+    };
+    // The perimeter centroid `centered` subtracts, kept for the answer's frame.
+    let c = plan.perimeter_centroid();
+    let centroid = [c.x as f64, c.y as f64];
+    let plan = plan.centered();
+    fits_pipeline(&plan).map_err(e)?;
+    let remarks = admissible::check(&plan).map_err(e)?;
+    let frame = PlanFrame {
+        unit: unit_name.to_string(),
+        scale,
+        bbox_centre: [cx, cy],
+        centroid,
+    };
+    Ok((plan, frame, remarks, used))
 }
 
 /// Starts an episode in `plan` with both rotation settings, so that a plan the pipeline
@@ -616,6 +661,7 @@ fn our_json_room(path: &Path, value: &serde_json::Value) -> Result<RawRoom, Plan
             .and_then(|n| n.as_str())
             .map(str::to_string),
         vertices,
+        columns: Vec::new(),
         warnings: Vec::new(),
     })
 }

@@ -4,17 +4,26 @@
 //! correspondences), outward normals (incidence checks), perimeter length and perimeter
 //! centroid (the model frame's origin), and the topological scan (visible wall junctions).
 //!
-//! A [`FloorPlan`] is a simple, counter-clockwise polygon of at most [`MAX_VERTICES`]
-//! vertices. It is validated once, on construction; every query afterwards may assume a
-//! valid outline. Invalid input (a polygon arriving over the serial link, a bad JSON file)
-//! is a [`PlanError`], never a panic.
+//! A [`FloorPlan`] is a room: a simple, counter-clockwise outline, up to eight columns
+//! inside it (each a clockwise ring, so the room lies on the left of every wall and the
+//! outward normal of every wall points out of the room), and door openings on outline walls
+//! (an opening closes the room for point-in-room tests, but the EDM sees through it). All
+//! rings share [`MAX_VERTICES`] vertices. A plan is validated once, on construction
+//! ([`validate`]); every query afterwards may assume a valid plan. Invalid input (a plan
+//! arriving over the serial link, a bad file) is a [`PlanError`], never a panic. A plain
+//! plan (one ring, no opening) runs exactly the arithmetic it ran before rings existed.
 
 use crate::world::geometry::{cross, length, v2, Vec2};
 use crate::world::math::{abs, acos, atan2, wrap_angle};
 use heapless::Vec as HVec;
 use serde::{Deserialize, Serialize};
 
-/// Fixed vertex capacity of a floor-plan (the generator uses at most 32).
+mod build;
+mod validate;
+
+/// Fixed ring capacity of a floor-plan: the outline and up to eight columns.
+pub use crate::limits::MAX_RINGS;
+/// Fixed vertex capacity of a floor-plan, all rings together (the generator uses at most 32).
 pub use crate::limits::MAX_VERTICES;
 /// Shortest accepted wall (m).
 pub const MIN_EDGE_LENGTH: f32 = 0.01;
@@ -44,6 +53,23 @@ pub enum PlanError {
     SelfIntersection(u8, u8),
     /// The vertices run clockwise (negative signed area).
     Clockwise,
+    /// More than [`MAX_RINGS`] rings (the outline and eight columns).
+    TooManyRings,
+    /// The ring ends do not rise strictly to the vertex count.
+    BadRingEnds,
+    /// This ring (0 = the outline, then the columns) has fewer than three vertices.
+    RingTooSmall(u8),
+    /// This column ring (1-based ring index) is not inside the room (it lies outside the
+    /// outline, or inside another column).
+    ColumnOutsideRoom(u8),
+    /// This column ring runs counter-clockwise (the wire form wants columns clockwise).
+    ColumnNotClockwise(u8),
+    /// This wall is marked as an opening but is not an outline wall (or does not exist).
+    OpeningNotOnOutline(u8),
+    /// This wall and the next are both openings (a door needs a jamb between them).
+    AdjacentOpenings(u8),
+    /// This door (0-based, in the order given) lies on no outline wall within the tolerance.
+    DoorOffWalls(u8),
 }
 
 impl core::fmt::Display for PlanError {
@@ -66,6 +92,26 @@ impl core::fmt::Display for PlanError {
             }
             PlanError::SelfIntersection(i, j) => write!(f, "edges {i} and {j} intersect"),
             PlanError::Clockwise => write!(f, "vertices must run counter-clockwise"),
+            PlanError::TooManyRings => {
+                write!(f, "a floor-plan may have at most {} columns", MAX_RINGS - 1)
+            }
+            PlanError::BadRingEnds => {
+                write!(f, "the ring ends must rise strictly to the vertex count")
+            }
+            PlanError::RingTooSmall(r) => write!(f, "ring {r} has fewer than 3 vertices"),
+            PlanError::ColumnOutsideRoom(r) => {
+                write!(f, "column {r} is not inside the room")
+            }
+            PlanError::ColumnNotClockwise(r) => {
+                write!(f, "column {r} must run clockwise")
+            }
+            PlanError::OpeningNotOnOutline(i) => {
+                write!(f, "wall {i} is an opening but not an outline wall")
+            }
+            PlanError::AdjacentOpenings(i) => {
+                write!(f, "walls {i} and the next are both openings")
+            }
+            PlanError::DoorOffWalls(d) => write!(f, "door {d} lies on no outline wall"),
         }
     }
 }
@@ -75,7 +121,7 @@ impl core::fmt::Display for PlanError {
 pub struct RayHit {
     /// Distance from the ray origin to the hit point (m).
     pub range: f32,
-    /// Index of the wall (edge `i` runs from vertex `i` to vertex `i+1`).
+    /// Index of the wall (edge `i` runs from vertex `i` to the next vertex of its ring).
     pub wall: usize,
     /// Angle between the ray and the wall's outward normal, in [0, π/2] for hits from
     /// inside the room (0 = perpendicular hit).
@@ -95,10 +141,22 @@ pub struct NearestPoint {
     pub distance: f32,
 }
 
-/// A validated, simple, counter-clockwise polygon.
+/// A validated room: a counter-clockwise outline, clockwise columns, door openings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FloorPlan {
+    /// Every ring's vertices, the outline first, then each column.
     vertices: HVec<[f32; 2], MAX_VERTICES>,
+    /// Exclusive end index of each ring; empty for a plan of one ring (the form every plan
+    /// had before columns, so older JSON files load and write unchanged).
+    #[serde(default, skip_serializing_if = "HVec::is_empty")]
+    rings: HVec<u8, MAX_RINGS>,
+    /// Bit `i` set: wall `i` is a door opening (a gap, not a wall).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    openings: u64,
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 impl FloorPlan {
@@ -107,6 +165,8 @@ impl FloorPlan {
     pub const fn empty() -> Self {
         FloorPlan {
             vertices: HVec::new(),
+            rings: HVec::new(),
+            openings: 0,
         }
     }
 
@@ -138,74 +198,119 @@ impl FloorPlan {
         }
     }
 
-    /// Validates raw `[x, y]` pairs (the wire representation).
+    /// Validates raw `[x, y]` pairs of one counter-clockwise ring without openings.
     pub fn from_raw(vertices: HVec<[f32; 2], MAX_VERTICES>) -> Result<Self, PlanError> {
-        let plan = FloorPlan { vertices };
+        let plan = FloorPlan {
+            vertices,
+            rings: HVec::new(),
+            openings: 0,
+        };
         plan.validate()?;
         Ok(plan)
     }
 
-    /// Re-checks every invariant; `Deserialize` bypasses [`FloorPlan::new`], so data
-    /// decoded from outside must pass through here (or [`FloorPlan::from_raw`]).
-    pub fn validate(&self) -> Result<(), PlanError> {
-        let n = self.vertices.len();
-        if n < 3 {
-            return Err(PlanError::TooFewVertices);
-        }
-        for (i, v) in self.vertices.iter().enumerate() {
-            if !v[0].is_finite() || !v[1].is_finite() {
-                return Err(PlanError::NonFiniteCoordinate(i as u8));
-            }
-        }
-        let (lo, hi) = self.bounds();
-        let ext = hi - lo;
-        if !(ext.x >= MIN_EXTENT
-            && ext.y >= MIN_EXTENT
-            && ext.x <= MAX_EXTENT
-            && ext.y <= MAX_EXTENT)
-        {
-            return Err(PlanError::BadExtent);
-        }
-        for i in 0..n {
-            if length(self.vertex(i + 1) - self.vertex(i)) < MIN_EDGE_LENGTH {
-                return Err(PlanError::ZeroLengthEdge(i as u8));
-            }
-        }
-        for i in 0..n {
-            let a = self.vertex(i + n - 1);
-            let b = self.vertex(i);
-            let c = self.vertex(i + 1);
-            let (d0, d1) = (b - a, c - b);
-            let s = cross(d0, d1) / (length(d0) * length(d1));
-            if abs(s) < COLLINEAR_SIN_TOLERANCE {
-                return Err(PlanError::CollinearVertex(i as u8));
-            }
-        }
-        for i in 0..n {
-            for j in (i + 1)..n {
-                // Adjacent edges share a vertex by construction; skip them.
-                if j == i + 1 || (i == 0 && j == n - 1) {
-                    continue;
-                }
-                if segments_touch(
-                    self.vertex(i),
-                    self.vertex(i + 1),
-                    self.vertex(j),
-                    self.vertex(j + 1),
-                ) {
-                    return Err(PlanError::SelfIntersection(i as u8, j as u8));
-                }
-            }
-        }
-        if self.signed_area() <= 0.0 {
-            return Err(PlanError::Clockwise);
-        }
-        Ok(())
-    }
-
-    /// Number of vertices (= number of walls).
+    /// Number of vertices of all rings (= number of walls, openings included).
     pub fn len(&self) -> usize {
         self.vertices.len()
+    }
+
+    /// True for a plan of one ring without openings (every plan before columns and doors).
+    pub fn is_plain(&self) -> bool {
+        self.rings.is_empty() && self.openings == 0
+    }
+
+    /// Number of rings (1 = the outline alone).
+    pub fn ring_count(&self) -> usize {
+        self.rings.len().max(1)
+    }
+
+    /// Vertex index range of ring `r` (0 = the outline, then the columns); empty when
+    /// there is no such ring.
+    pub fn ring(&self, r: usize) -> core::ops::Range<usize> {
+        let n = self.vertices.len();
+        if self.rings.is_empty() {
+            return if r == 0 { 0..n } else { n..n };
+        }
+        let end = |k: usize| self.rings.get(k).map_or(n, |&e| (e as usize).min(n));
+        let start = if r == 0 { 0 } else { end(r - 1) };
+        match self.rings.get(r) {
+            Some(_) => start.min(end(r))..end(r),
+            None => n..n,
+        }
+    }
+
+    /// The exclusive end index of every ring (the wire form); empty for a one-ring plan.
+    pub fn ring_ends(&self) -> &[u8] {
+        &self.rings
+    }
+
+    /// The door openings as a bit mask over the walls (the wire form).
+    pub fn openings(&self) -> u64 {
+        self.openings
+    }
+
+    /// True when wall `i` is a door opening: rays pass through it, no reading pairs with it.
+    #[inline]
+    pub fn is_opening(&self, i: usize) -> bool {
+        i < 64 && self.openings & (1u64 << i) != 0
+    }
+
+    /// The walls the EDM can hit (every wall but the openings), in index order.
+    pub fn solid_walls(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.len()).filter(move |&i| !self.is_opening(i))
+    }
+
+    /// The vertex after `i` in `i`'s ring (indices wrap around the whole list first).
+    #[inline]
+    pub fn next(&self, i: usize) -> usize {
+        if self.rings.is_empty() {
+            return (i + 1) % self.vertices.len().max(1);
+        }
+        self.next_in_rings(i)
+    }
+
+    /// [`FloorPlan::next`] for a plan of several rings: out of line, so the one-ring path
+    /// every hot loop inlines stays as small as it was (the firmware's flash).
+    #[inline(never)]
+    fn next_in_rings(&self, i: usize) -> usize {
+        let n = self.vertices.len();
+        let i = i % n.max(1);
+        let ring = self.ring_of(i);
+        if i + 1 >= ring.end {
+            ring.start
+        } else {
+            i + 1
+        }
+    }
+
+    /// The vertex before `i` in `i`'s ring.
+    #[inline]
+    pub fn prev(&self, i: usize) -> usize {
+        let n = self.vertices.len();
+        if self.rings.is_empty() {
+            return (i + n.max(1) - 1) % n.max(1);
+        }
+        let i = i % n.max(1);
+        let ring = self.ring_of(i);
+        if i <= ring.start {
+            ring.end.max(ring.start + 1) - 1
+        } else {
+            i - 1
+        }
+    }
+
+    /// The ring holding vertex `i` (the last ring for an out-of-range index).
+    fn ring_of(&self, i: usize) -> core::ops::Range<usize> {
+        let n = self.vertices.len();
+        let mut start = 0;
+        for &e in self.rings.iter() {
+            let e = (e as usize).min(n);
+            if i < e {
+                return start..e;
+            }
+            start = e;
+        }
+        start.min(n)..n
     }
 
     /// Always false for a valid plan; present for API completeness.
@@ -230,14 +335,18 @@ impl FloorPlan {
         self.vertices.iter().map(|v| v2(v[0], v[1]))
     }
 
-    /// Wall `i` as `(start, end)`.
+    /// Wall `i` as `(start, end)`: from vertex `i` to the next vertex of its ring.
     #[inline]
     pub fn wall(&self, i: usize) -> (Vec2, Vec2) {
-        (self.vertex(i), self.vertex(i + 1))
+        if self.rings.is_empty() {
+            return (self.vertex(i), self.vertex(i + 1));
+        }
+        (self.vertex(i), self.vertex(self.next(i)))
     }
 
-    /// Outward unit normal of wall `i`. For a counter-clockwise outline the interior is on
-    /// the left of each edge, so the outward normal is the edge direction turned right.
+    /// Outward unit normal of wall `i`. The room is on the left of every wall (outline
+    /// counter-clockwise, columns clockwise), so the normal pointing out of the room (into
+    /// a column, for a column's wall) is the edge direction turned right.
     pub fn outward_normal(&self, i: usize) -> Vec2 {
         let (a, b) = self.wall(i);
         let d = b - a;
@@ -255,28 +364,44 @@ impl FloorPlan {
         (lo, hi)
     }
 
-    /// Signed area (shoelace); positive for counter-clockwise outlines.
+    /// Signed area (shoelace over every ring): positive for a valid plan, the room's floor
+    /// area (the columns' clockwise rings subtract theirs).
     pub fn signed_area(&self) -> f32 {
         let mut s = 0.0;
         for i in 0..self.len() {
-            s += cross(self.vertex(i), self.vertex(i + 1));
+            let (a, b) = self.wall(i);
+            s += cross(a, b);
         }
         0.5 * s
     }
 
-    /// Perimeter length (m).
+    /// Signed area of ring `r` alone (positive counter-clockwise).
+    pub fn ring_area(&self, r: usize) -> f32 {
+        let mut s = 0.0;
+        for i in self.ring(r) {
+            let (a, b) = self.wall(i);
+            s += cross(a, b);
+        }
+        0.5 * s
+    }
+
+    /// Length of the solid walls (m): the wall surface the instrument can measure.
     pub fn perimeter(&self) -> f32 {
-        (0..self.len())
-            .map(|i| length(self.vertex(i + 1) - self.vertex(i)))
+        self.solid_walls()
+            .map(|i| {
+                let (a, b) = self.wall(i);
+                length(b - a)
+            })
             .sum()
     }
 
-    /// Perimeter centroid: the centre of mass of the outline with uniform density along
-    /// the walls. This is the model frame's origin (paper §3.2, §3.4).
+    /// Perimeter centroid: the centre of mass of the solid walls (columns included,
+    /// openings not) with uniform density along them. This is the model frame's origin
+    /// (paper §3.2, §3.4).
     pub fn perimeter_centroid(&self) -> Vec2 {
         let mut acc = v2(0.0, 0.0);
         let mut total = 0.0;
-        for i in 0..self.len() {
+        for i in self.solid_walls() {
             let (a, b) = self.wall(i);
             let l = length(b - a);
             acc += (a + b) * (0.5 * l);
@@ -290,14 +415,14 @@ impl FloorPlan {
         self.translated(-self.perimeter_centroid())
     }
 
-    /// The outline translated by `d` (validity is preserved by translation).
+    /// The plan translated by `d` (validity is preserved by translation).
     pub fn translated(&self, d: Vec2) -> FloorPlan {
-        let mut vertices = self.vertices.clone();
-        for v in vertices.iter_mut() {
+        let mut plan = self.clone();
+        for v in plan.vertices.iter_mut() {
             v[0] += d.x;
             v[1] += d.y;
         }
-        FloorPlan { vertices }
+        plan
     }
 
     /// Largest distance from the origin to any vertex (the model's "radius" when centred).
@@ -305,13 +430,14 @@ impl FloorPlan {
         self.vertices().map(length).fold(0.0, f32::max)
     }
 
-    /// Point-in-polygon by crossing number. Points exactly on a wall may go either way.
+    /// Point-in-room by crossing number over every edge of every ring, openings included
+    /// (a door does not open the room to the outside; a point inside a column is outside
+    /// the room). Points exactly on a wall may go either way.
     pub fn contains(&self, p: Vec2) -> bool {
         let mut inside = false;
         let n = self.len();
         for i in 0..n {
-            let a = self.vertex(i);
-            let b = self.vertex(i + 1);
+            let (a, b) = self.wall(i);
             if (a.y > p.y) != (b.y > p.y) {
                 let x = a.x + (p.y - a.y) * (b.x - a.x) / (b.y - a.y);
                 if p.x < x {
@@ -322,9 +448,10 @@ impl FloorPlan {
         inside
     }
 
-    /// Casts a ray from `origin` along the unit direction `dir` and returns the first wall
-    /// it meets at a distance greater than `1e-6` m, or `None` when it meets none (an
-    /// origin outside the room looking away from it).
+    /// Casts a ray from `origin` along the unit direction `dir` and returns the first solid
+    /// wall (outline or column) it meets at a distance greater than `1e-6` m, or `None` when
+    /// it meets none (an origin outside the room looking away from it, or a ray leaving
+    /// through a door). A door opening is not a wall: the ray passes through it.
     pub fn ray_cast(&self, origin: Vec2, dir: Vec2) -> Option<RayHit> {
         let (i, t) = self.nearest_wall_along(origin, dir)?;
         let n = self.outward_normal(i);
@@ -341,7 +468,7 @@ impl FloorPlan {
     /// equal distances): what [`FloorPlan::ray_cast`] and [`FloorPlan::first_hit`] share.
     fn nearest_wall_along(&self, origin: Vec2, dir: Vec2) -> Option<(usize, f32)> {
         let mut best: Option<(usize, f32)> = None;
-        for i in 0..self.len() {
+        for i in self.solid_walls() {
             let (a, b) = self.wall(i);
             let e = b - a;
             let denom = cross(dir, e);
@@ -358,15 +485,16 @@ impl FloorPlan {
         best
     }
 
-    /// Closest point of the outline to `p`.
+    /// Closest point of the solid walls to `p` (never on a door opening).
     pub fn nearest_point(&self, p: Vec2) -> NearestPoint {
         let mut best = NearestPoint {
             point: self.vertex(0),
             wall: 0,
             distance: f32::INFINITY,
         };
-        for i in 0..self.len() {
-            let q = closest_on_segment(p, self.vertex(i), self.vertex(i + 1));
+        for i in self.solid_walls() {
+            let (a, b) = self.wall(i);
+            let q = closest_on_segment(p, a, b);
             let d = length(p - q);
             if d < best.distance {
                 best = NearestPoint {
@@ -391,7 +519,7 @@ impl FloorPlan {
             return true;
         }
         let (dir, before) = (d / dist, dist - tolerance);
-        !(0..self.len()).any(|i| {
+        !self.solid_walls().any(|i| {
             let (a, b) = self.wall(i);
             let (w, e) = (a - from, b - a);
             blocks((w, e, cross(w, e)), dir, before)
@@ -407,8 +535,8 @@ impl FloorPlan {
 
     /// The topological scan (paper §3.1, §4.1): `N` binary pixels spanning `fov` radians
     /// centred on the scene-frame `bearing`, pixel 0 at the right (clockwise) edge. A pixel
-    /// is set when a wall junction visible from `origin` lies in its angular bin. Bins are
-    /// half-open `[lo, hi)` counter-clockwise.
+    /// is set when a wall junction (a vertex of any ring, door jambs included) visible from
+    /// `origin` lies in its angular bin. Bins are half-open `[lo, hi)` counter-clockwise.
     pub fn topological_scan<const N: usize>(
         &self,
         origin: Vec2,
@@ -462,7 +590,7 @@ pub(crate) fn blocks((w, e, cross_we): (Vec2, Vec2, f32), dir: Vec2, before: f32
 }
 
 /// True when closed segments `ab` and `cd` share at least one point.
-fn segments_touch(a: Vec2, b: Vec2, c: Vec2, d: Vec2) -> bool {
+pub(crate) fn segments_touch(a: Vec2, b: Vec2, c: Vec2, d: Vec2) -> bool {
     let o1 = orient(a, b, c);
     let o2 = orient(a, b, d);
     let o3 = orient(c, d, a);
@@ -493,157 +621,4 @@ fn on_segment(a: Vec2, b: Vec2, p: Vec2) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::fixtures::{l_room_6x4, rect};
-    use crate::world::geometry::unit;
-    use core::f32::consts::{FRAC_PI_2, PI};
-
-    #[test]
-    fn rejects_invalid() {
-        let z = v2(0.0, 0.0);
-        assert_eq!(
-            FloorPlan::new(&[z, v2(1.0, 0.0)]),
-            Err(PlanError::TooFewVertices)
-        );
-        assert_eq!(
-            FloorPlan::new(&[v2(0.0, 0.0), v2(0.0, 4.0), v2(4.0, 4.0), v2(4.0, 0.0)]),
-            Err(PlanError::Clockwise)
-        );
-        assert!(FloorPlan::new_any_orientation(&[
-            v2(0.0, 0.0),
-            v2(0.0, 4.0),
-            v2(4.0, 4.0),
-            v2(4.0, 0.0)
-        ])
-        .is_ok());
-        assert_eq!(
-            FloorPlan::new(&[v2(0.0, 0.0), v2(f32::NAN, 0.0), v2(4.0, 4.0)]),
-            Err(PlanError::NonFiniteCoordinate(1))
-        );
-        // bow-tie
-        assert!(matches!(
-            FloorPlan::new(&[v2(0.0, 0.0), v2(4.0, 4.0), v2(4.0, 0.0), v2(0.0, 4.0)]),
-            Err(PlanError::SelfIntersection(_, _))
-        ));
-        // collinear middle vertex
-        assert_eq!(
-            FloorPlan::new(&[
-                v2(0.0, 0.0),
-                v2(2.0, 0.0),
-                v2(4.0, 0.0),
-                v2(4.0, 4.0),
-                v2(0.0, 4.0)
-            ]),
-            Err(PlanError::CollinearVertex(1))
-        );
-        // duplicate vertex
-        assert_eq!(
-            FloorPlan::new(&[
-                v2(0.0, 0.0),
-                v2(4.0, 0.0),
-                v2(4.0, 0.0),
-                v2(4.0, 4.0),
-                v2(0.0, 4.0)
-            ]),
-            Err(PlanError::ZeroLengthEdge(1))
-        );
-        assert_eq!(
-            FloorPlan::new(&[v2(0.0, 0.0), v2(0.1, 0.0), v2(0.1, 0.1)]),
-            Err(PlanError::BadExtent)
-        );
-        let many = [v2(0.0, 0.0); MAX_VERTICES + 1];
-        assert_eq!(FloorPlan::new(&many), Err(PlanError::TooManyVertices));
-    }
-
-    #[test]
-    fn rectangle_metrics() {
-        let r = rect(4.0, 2.0);
-        assert_eq!(r.perimeter(), 12.0);
-        assert_eq!(r.signed_area(), 8.0);
-        let c = r.perimeter_centroid();
-        assert!((c - v2(2.0, 1.0)).norm() < 1e-6);
-        assert_eq!(r.outward_normal(0), v2(0.0, -1.0));
-        assert_eq!(r.outward_normal(1), v2(1.0, 0.0));
-        assert!(r.contains(v2(1.0, 1.0)) && !r.contains(v2(5.0, 1.0)));
-    }
-
-    #[test]
-    fn ray_cast_rectangle_analytic() {
-        let r = rect(4.0, 2.0);
-        let o = v2(1.0, 0.5);
-        let h = r.ray_cast(o, unit(0.0)).unwrap();
-        assert!((h.range - 3.0).abs() < 1e-5 && h.wall == 1 && h.incidence.abs() < 1e-3);
-        let h = r.ray_cast(o, unit(FRAC_PI_2)).unwrap();
-        assert!((h.range - 1.5).abs() < 1e-5 && h.wall == 2);
-        let h = r.ray_cast(o, unit(PI)).unwrap();
-        assert!((h.range - 1.0).abs() < 1e-5 && h.wall == 3);
-        // 30 degrees: hits the top wall (y = 2) at x = 1 + 1.5 / tan(30°) = 3.598
-        let a = PI / 6.0;
-        let h = r.ray_cast(o, unit(a)).unwrap();
-        assert!((h.range - 3.0).abs() < 1e-4, "{h:?}");
-        assert_eq!(h.wall, 2);
-        assert!((h.incidence - (FRAC_PI_2 - a)).abs() < 1e-3);
-    }
-
-    #[test]
-    fn ray_cast_l_room_occlusion() {
-        let l = l_room_6x4();
-        // From the lower arm looking up-right at 45°, the ray hits the inner wall x = 3.
-        let o = v2(1.0, 1.0);
-        let d = unit(PI / 4.0);
-        let h = l.ray_cast(o, d).unwrap();
-        // y = 2 at x = 2 -> passes the inner corner (3,2)? At x=3, y=3: inner wall x=3 spans y in [2,4]
-        assert_eq!(h.wall, 3, "{h:?}");
-        assert!((h.range - 2.0 * 2f32.sqrt()).abs() < 1e-4);
-        // From the lower-right arm looking left along y = 1 we cross the whole room.
-        let h = l.ray_cast(v2(5.0, 1.0), unit(PI)).unwrap();
-        assert!((h.range - 5.0).abs() < 1e-5 && h.wall == 5);
-        // From (5,1) towards the upper-left corner: blocked by the notch wall y = 2.
-        assert!(!l.visible(v2(5.0, 1.0), v2(0.0, 4.0), 1e-3));
-        assert!(l.visible(v2(1.0, 1.0), v2(0.0, 4.0), 1e-3));
-    }
-
-    #[test]
-    fn nearest_point_on_outline() {
-        let r = rect(4.0, 2.0);
-        let n = r.nearest_point(v2(3.5, 1.0));
-        assert_eq!(n.wall, 1);
-        assert!((n.distance - 0.5).abs() < 1e-6);
-        let n = r.nearest_point(v2(5.0, 3.0));
-        assert!((n.point - v2(4.0, 2.0)).norm() < 1e-6);
-    }
-
-    #[test]
-    fn topological_scan_hand_worked() {
-        let r = rect(4.0, 4.0);
-        // From the centre, the corner (4,4) lies at 45°. Looking at 45° with a 45° FOV
-        // and 20 pixels, it is exactly at the centre: bin index 10 (bins are [lo, hi)).
-        let s: [bool; 20] = r.topological_scan(v2(2.0, 2.0), PI / 4.0, PI / 4.0);
-        assert_eq!(s.iter().filter(|&&b| b).count(), 1);
-        assert!(s[10]);
-        // Looking along +x, no corner is within ±22.5°.
-        let s: [bool; 20] = r.topological_scan(v2(2.0, 2.0), 0.0, PI / 4.0);
-        assert!(s.iter().all(|&b| !b));
-        // From (1, 2) the corner (4, 4) is at atan2(2, 3) = 33.69°, (4, 0) at -33.69°.
-        // Looking at +x they are outside the ±22.5° FOV; at 33.69° - 10° the corner sits
-        // 10° left of centre: bin floor((10 + 22.5) / 45 * 20) = 14.
-        let b = libm::atan2f(2.0, 3.0) - 10f32.to_radians();
-        let s: [bool; 20] = r.topological_scan(v2(1.0, 2.0), b, PI / 4.0);
-        assert!(s[14] && s.iter().filter(|&&b| b).count() == 1, "{s:?}");
-    }
-
-    #[test]
-    fn topological_scan_occlusion() {
-        let l = l_room_6x4();
-        // From (5, 1) the far upper-left corner (0, 4) is hidden behind the notch, but the
-        // inner corner (3, 2) is visible. Bearing toward (0, 4):
-        let o = v2(5.0, 1.0);
-        let to_hidden = libm::atan2f(3.0, -5.0);
-        let s: [bool; 20] = l.topological_scan(o, to_hidden, 0.1);
-        assert!(s.iter().all(|&b| !b), "hidden corner must not show: {s:?}");
-        let to_inner = libm::atan2f(1.0, -2.0);
-        let s: [bool; 20] = l.topological_scan(o, to_inner, 0.1);
-        assert!(s.iter().any(|&b| b), "inner corner must show: {s:?}");
-    }
-}
+mod tests;
