@@ -308,6 +308,9 @@ pub struct EpisodeView<'a> {
     pub truth: &'a Pose2,
     /// The step just recorded (`None` before the first action).
     pub step: Option<&'a StepRecord>,
+    /// How far the simulated room departs from its plan (drawn per episode under `--site
+    /// mixed`): the calibration keeps its stated risk on each level.
+    pub site_level: crate::world::site::SiteLevel,
 }
 
 /// [`run_episode_with`], calling `observe` before the first action and after each one (the
@@ -326,6 +329,7 @@ pub fn run_episode_observed(
         plan: &plan,
         truth: &truth,
         step: None,
+        site_level: world.site().level,
     });
     while let Some(action) = runner.decide(policy) {
         let (obs, step_truth) = world.act(action);
@@ -360,6 +364,7 @@ pub fn run_episode_observed(
             plan: &plan,
             truth: &truth,
             step: steps.last(),
+            site_level: world.site().level,
         });
     }
     let end = match runner.stop() {

@@ -89,6 +89,10 @@ pub struct Sample {
     /// The answer's heading error (degrees, at the same equivalent).
     #[serde(default)]
     pub heading_error_deg: f32,
+    /// How far the episode's room departed from its plan ([`threshold_table`] keeps the
+    /// stated risk on each level).
+    #[serde(default)]
+    pub level: SiteLevel,
 }
 
 /// The samples of one episode, in step order.
@@ -135,6 +139,7 @@ pub fn collect(
                         wrong: !tolerance.admits(&errors),
                         position_error: errors.position,
                         heading_error_deg: errors.heading.to_degrees(),
+                        level: v.site_level,
                     });
                 }
             })
@@ -345,11 +350,50 @@ pub const UPPER_BOUND_Z: f64 = 1.645;
 /// stopped, and whose own wrong rate's one-sided 95 % upper bound
 /// ([`Crossings::wrong_rate_bound`]) is at most P. A stated risk no threshold meets gets
 /// the smallest candidate.
+///
+/// **On each site level.** Where the episodes mix site levels (`calibrate --site mixed`),
+/// each level's episodes get a table of their own and the smallest threshold of the
+/// levels is kept, so that the stated risk holds in a furnished room, not only on the
+/// average of the levels: the instrument cannot tell which room it stands in. A level on
+/// which no threshold keeps a stated risk does not set it (building sites at 1 %, where
+/// walls 3–6 cm off their lines move answers past the 5 cm tolerance unseen: every
+/// threshold of theirs failed, and the instrument would never answer anywhere);
+/// `docs/EVALUATION.md` says where the stated risk is not kept.
+/// Fitted on the pooled episodes, the EDM-only stop stated 1 % and answered wrongly in 1.6 %
+/// of the answers in furnished rooms (`docs/EVALUATION.md`, "Rooms that are not their
+/// plans").
 pub fn threshold_table(
     model: &StopModel,
     episodes: &[&EpisodeSamples],
 ) -> [f32; STATED_RISKS.len()] {
-    threshold_table_by(episodes, |s| score(model, s))
+    let levels = [SiteLevel::Plan, SiteLevel::Furnished, SiteLevel::Site];
+    let of_level = |l: SiteLevel| -> Vec<&EpisodeSamples> {
+        episodes
+            .iter()
+            .copied()
+            .filter(|e| e.first().is_some_and(|s| s.level == l))
+            .collect()
+    };
+    let present: Vec<Vec<&EpisodeSamples>> = levels
+        .iter()
+        .map(|&l| of_level(l))
+        .filter(|e| !e.is_empty())
+        .collect();
+    if present.len() <= 1 {
+        return threshold_table_by(episodes, |s| score(model, s));
+    }
+    let mut table: [Option<f32>; STATED_RISKS.len()] = [None; STATED_RISKS.len()];
+    for level in &present {
+        let t = kept_thresholds(level, |s| score(model, s));
+        for (a, b) in table.iter_mut().zip(t) {
+            *a = match (*a, b) {
+                (Some(x), Some(y)) => Some(x.min(y)),
+                (x, y) => x.or(y),
+            };
+        }
+    }
+    let smallest = candidate_thresholds().next().unwrap_or(1e-5);
+    table.map(|t| t.unwrap_or(smallest))
 }
 
 /// [`threshold_table`] for any score of a decision point (`examples/stop_score_exponent.rs`
@@ -358,6 +402,15 @@ pub fn threshold_table_by(
     episodes: &[&EpisodeSamples],
     score: impl Fn(&Sample) -> f32,
 ) -> [f32; STATED_RISKS.len()] {
+    let smallest = candidate_thresholds().next().unwrap_or(1e-5);
+    kept_thresholds(episodes, score).map(|t| t.unwrap_or(smallest))
+}
+
+/// [`threshold_table_by`] with `None` where no candidate keeps the stated risk.
+fn kept_thresholds(
+    episodes: &[&EpisodeSamples],
+    score: impl Fn(&Sample) -> f32,
+) -> [Option<f32>; STATED_RISKS.len()] {
     // The running maximum of the wrong rate over ever larger thresholds, and each
     // threshold's own upper bound.
     let mut envelope = 0.0f64;
@@ -374,7 +427,7 @@ pub fn threshold_table_by(
             .take_while(|&&(_, w, _)| w <= p as f64)
             .filter(|&&(_, _, bound)| bound <= p as f64)
             .last()
-            .map_or(rates[0].0, |&(t, _, _)| t)
+            .map(|&(t, _, _)| t)
     })
 }
 
@@ -704,7 +757,58 @@ mod tests {
             wrong,
             position_error: 0.0,
             heading_error_deg: 0.0,
+            level: SiteLevel::Plan,
         }
+    }
+
+    /// Mixed site levels: 4000 plan-level episodes never wrong, and 4000 site-level ones
+    /// wrong in 15 % of the stops at 0.4 and 8 % at 0.04. Pooled, 7.5 % passes a stated
+    /// 10 % at 0.4; on each level the site's 15 % holds it below 0.4.
+    #[test]
+    fn threshold_table_keeps_the_stated_risk_on_each_site_level() {
+        let model = peak_mass_model();
+        let at = |level, risk, wrong| Sample {
+            level,
+            ..point(risk, wrong)
+        };
+        let mut episodes: Vec<EpisodeSamples> = (0..4000)
+            .map(|_| {
+                vec![
+                    at(SiteLevel::Plan, 0.4, false),
+                    at(SiteLevel::Plan, 0.001, false),
+                ]
+            })
+            .collect();
+        episodes.extend((0..4000).map(|i| {
+            vec![
+                at(SiteLevel::Site, 0.4, i < 600),
+                at(SiteLevel::Site, 0.04, i < 320),
+                at(SiteLevel::Site, 0.001, false),
+            ]
+        }));
+        // A third level wrong in 5 % of the stops at every score keeps no 1 %: it does not
+        // set that threshold (else nothing would ever answer), and keeps 10 % anywhere.
+        episodes.extend((0..4000).map(|i| {
+            vec![
+                at(SiteLevel::Furnished, 0.4, i < 200),
+                at(SiteLevel::Furnished, 0.04, i < 200),
+                at(SiteLevel::Furnished, 0.001, i < 200),
+            ]
+        }));
+        let refs: Vec<&EpisodeSamples> = episodes.iter().collect();
+        let t = threshold_table(&model, &refs);
+        let pooled = threshold_table_by(&refs[..8000], |s| score(&model, s));
+        let ten = STATED_RISKS.iter().position(|&p| p == 0.1).unwrap();
+        let one = STATED_RISKS.iter().position(|&p| p == 0.01).unwrap();
+        assert!(pooled[ten] > 0.4, "{pooled:?}");
+        assert!(t[ten] > 0.04 && t[ten] <= 0.4, "{t:?}");
+        assert!(t[one] > 0.001 && t[one] <= 0.04, "{t:?}");
+        // One level alone is the pooled table.
+        let plan_only: Vec<&EpisodeSamples> = refs[..4000].to_vec();
+        assert_eq!(
+            threshold_table(&model, &plan_only),
+            threshold_table_by(&plan_only, |s| score(&model, s))
+        );
     }
 
     /// The threshold table: 4000 episodes whose first crossings are wrong in 0 %, 8 % and
