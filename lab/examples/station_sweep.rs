@@ -1,6 +1,7 @@
 //! The station on rooms that are not generated plans: every room of the plan files given
-//! (default: the fixtures `cli/tests/fixtures/plans/` and the hand-drawn
-//! `lab/fixtures/rooms/`, one of them in national-grid coordinates), `--episodes N` setups
+//! (default: the fixtures `cli/tests/fixtures/plans/` and `plans/features/` (columns and
+//! doors), and the hand-drawn `lab/fixtures/rooms/`, one of them in national-grid
+//! coordinates), `--episodes N` setups
 //! each (episode seeds 0..N: where the instrument stands, the noise), played by the GeoCOM
 //! station session against the GeoCOM simulator's world in process (the TCP path gives the
 //! same answers bit for bit: `tests/tests/geocom.rs`), on `--instrument` (default `edm`,
@@ -58,7 +59,11 @@ fn main() -> anyhow::Result<()> {
         }
     }
     if files.is_empty() {
-        for dir in ["cli/tests/fixtures/plans", "lab/fixtures/rooms"] {
+        for dir in [
+            "cli/tests/fixtures/plans",
+            "cli/tests/fixtures/plans/features",
+            "lab/fixtures/rooms",
+        ] {
             let mut f: Vec<PathBuf> = std::fs::read_dir(dir)?
                 .map(|e| e.map(|e| e.path()))
                 .collect::<Result<_, _>>()?;
