@@ -166,8 +166,10 @@ fn an_unsure_confident_episode_answers_with_its_lowest_risk_moment() {
     assert_eq!(p.finish(&plan).answer_readings, n as u16);
 }
 
-/// The calibrated stop on noise-free readings: it stops by itself, on a pose that
-/// agrees with the argmax and is right, and the risk setting moves the stop.
+/// The calibrated stop on noise-free readings: it stops by itself, on a pose every reading
+/// explains and that is right (the refinement may have left the argmax's cell: with the
+/// residuals' variance factor the stop answers noise-free readings after four), and the
+/// risk setting moves the stop.
 #[test]
 fn confident_stop_follows_the_stop_risk() {
     let plan = l_room_8x6();
@@ -194,10 +196,7 @@ fn confident_stop_follows_the_stop_risk() {
         "noise-free readings reach a 1 % risk within 40 ranges"
     );
     let f = p.stop_features().expect("stopped on features");
-    assert!(
-        f.agrees && f.explained as usize == p.observations().len(),
-        "{f:?}"
-    );
+    assert!(f.explained as usize == p.observations().len(), "{f:?}");
     let risk = p.stop_risk_estimate().expect("features agree");
     let model = StopModel::for_rot_bins(params.rot_bins);
     // What the threshold is compared with: the estimate scaled by the distinct bearings.

@@ -228,6 +228,23 @@ fn log_ratio(sigma: f32, tolerance: f32) -> f32 {
     })
 }
 
+/// `t` with every row no looser than any row of a larger stated risk (a running minimum
+/// from the top): a smaller risk never stops earlier than a larger one.
+///
+/// **Why.** Tables kept on each site level (`activesense calibrate --site mixed`) take each
+/// row from the levels that can keep it: building sites keep 3 % and 10 % but not 1 %, so
+/// the fitted EDM-only K = 1 table came out looser at 1 % than at 3 %. Read as it stands,
+/// `--stop-risk 0.01` would have stopped before `--stop-risk 0.03` (the frontier's 1 % point
+/// cheaper than its 3 % point); a stated risk that is not kept on sites must not buy a
+/// looser stop than one that is.
+pub fn no_looser_than_above(t: &[f32; STATED_RISKS.len()]) -> [f32; STATED_RISKS.len()] {
+    let mut out = *t;
+    for i in (0..out.len() - 1).rev() {
+        out[i] = out[i].min(out[i + 1]);
+    }
+    out
+}
+
 /// The stated risks of [`StopModel::thresholds`] (the frontier's settings).
 pub const STATED_RISKS: [f32; 5] = [0.001, 0.003, 0.01, 0.03, 0.1];
 
@@ -292,9 +309,10 @@ impl StopModel {
     }
 
     /// The threshold the estimate must fall below for a stated risk `p` when `agent`
-    /// measures ([`StopModel::table_for`], interpolated by [`interpolate_table`]).
+    /// measures ([`StopModel::table_for`] made [`no_looser_than_above`], interpolated by
+    /// [`interpolate_table`]).
     pub fn threshold_for(&self, agent: AgentKind, p: f32) -> f32 {
-        interpolate_table(self.table_for(agent), p)
+        interpolate_table(&no_looser_than_above(self.table_for(agent)), p)
     }
 
     /// The calibrated risk of an answer whose [`stop_score`] is `score`: the smallest stated
@@ -573,6 +591,28 @@ mod tests {
         assert!(!m.stops(AgentKind::Learnt, 0.03, 4, 0.01));
         assert_eq!(stop_score(0.03, 8), 0.03);
         assert_eq!(stop_score(0.03, 0), stop_score(0.03, 1));
+    }
+
+    /// A table looser at 1 % than at 3 % (a level kept 3 % but not 1 %) is read as the 3 %
+    /// row at 1 %; tables that are already non-decreasing are read as they are.
+    #[test]
+    fn a_smaller_risk_never_stops_looser() {
+        let t = [0.008, 0.007, 0.02, 0.012, 0.12];
+        assert_eq!(no_looser_than_above(&t), [0.007, 0.007, 0.012, 0.012, 0.12]);
+        let sorted = [0.001, 0.003, 0.01, 0.03, 0.1];
+        assert_eq!(no_looser_than_above(&sorted), sorted);
+        for instrument in InstrumentProfile::ALL {
+            for k in [1u8, 10] {
+                let m = StopModel::built_in(instrument, k);
+                for agent in [AgentKind::Learnt, AgentKind::Heuristic1, AgentKind::Blind0] {
+                    let at = |p| m.threshold_for(agent, p);
+                    // Equal rows interpolate through exp(ln t): equal up to rounding.
+                    assert!(STATED_RISKS
+                        .windows(2)
+                        .all(|w| at(w[0]) <= at(w[1]) * (1.0 + 1e-5)));
+                }
+            }
+        }
     }
 
     #[test]
