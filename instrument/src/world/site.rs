@@ -302,16 +302,10 @@ pub fn through_plan_door(
     let mut best: Option<(f32, usize)> = None;
     for i in (0..plan.len()).filter(|&i| plan.is_opening(i)) {
         let (a, b) = plan.wall(i);
-        let e = b - a;
-        let denom = cross(dir, e);
-        if abs(denom) < 1e-12 {
+        let Some(t) = ray_meets_segment(origin, dir, a, b) else {
             continue;
-        }
-        let w = a - origin;
-        let t = cross(w, e) / denom;
-        let u = cross(w, dir) / denom;
-        if t > 1e-6 && t < wall_range && (0.0..=1.0).contains(&u) && best.is_none_or(|(h, _)| t < h)
-        {
+        };
+        if t < wall_range && best.is_none_or(|(h, _)| t < h) {
             best = Some((t, i));
         }
     }
@@ -319,6 +313,20 @@ pub fn through_plan_door(
     let n = plan.outward_normal(i);
     let incidence = acos(abs(dir.x * n.x + dir.y * n.y).min(1.0));
     Some((t + PLAN_DOOR_DEPTH / cos(incidence).max(0.2), incidence))
+}
+
+/// Distance along the ray from `origin` (unit `dir`) to segment `a → b`, when it crosses it
+/// beyond 1e-6 m (parallel segments never): the test doors and obstacles share.
+fn ray_meets_segment(origin: Vec2, dir: Vec2, a: Vec2, b: Vec2) -> Option<f32> {
+    let e = b - a;
+    let denom = cross(dir, e);
+    if abs(denom) < 1e-12 {
+        return None;
+    }
+    let w = a - origin;
+    let t = cross(w, e) / denom;
+    let u = cross(w, dir) / denom;
+    (t > 1e-6 && (0.0..=1.0).contains(&u)).then_some(t)
 }
 
 /// First crossing of the ray with a convex polygon's edges: range and incidence.
@@ -331,14 +339,10 @@ fn ray_polygon(corners: &[[f32; 2]], origin: Vec2, dir: Vec2) -> Option<(f32, f3
             corners[(i + 1) % corners.len()][1],
         );
         let e = b - a;
-        let denom = cross(dir, e);
-        if abs(denom) < 1e-12 {
+        let Some(t) = ray_meets_segment(origin, dir, a, b) else {
             continue;
-        }
-        let w = a - origin;
-        let t = cross(w, e) / denom;
-        let u = cross(w, dir) / denom;
-        if t > 1e-6 && (0.0..=1.0).contains(&u) && best.is_none_or(|(h, _)| t < h) {
+        };
+        if best.is_none_or(|(h, _)| t < h) {
             let len = sqrt(e.x * e.x + e.y * e.y);
             let c = abs(cross(dir, e)) / len; // |cos| of the angle to the edge's normal
             best = Some((t, acos(c.min(1.0))));
