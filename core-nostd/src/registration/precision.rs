@@ -101,10 +101,19 @@ fn explained_row_on(
     ))
 }
 
-/// True when the information matrix `info` leaves a direction free (by the test
-/// [`pose_covariance`] applies).
-fn singular(info: &[[f64; 3]; 3], fixed_heading: bool) -> bool {
-    let m = info;
+/// True when `rest`, what is left of the information matrix `whole` with some readings
+/// taken out, leaves a direction free: its determinant relative to the product of
+/// `whole`'s diagonal (the test [`pose_covariance`] applies, scaled by what the readings
+/// gave before any were taken out).
+///
+/// **Why `whole`'s diagonal.** A direction only the removed readings fixed leaves a
+/// rounding residue of about 1e-16 on `rest`'s diagonal, not a zero (the subtraction
+/// is in another order than the sum). Scaled by `rest`'s own diagonal, that residue
+/// cancels out of the ratio and the free direction looked fixed: a wall 5 cm off its
+/// line then answered 5.9 cm off, with the heading unknown, the position across it
+/// resting on two readings of that wall (`--site site`, plan 1000065, K = 10).
+fn singular(rest: &[[f64; 3]; 3], whole: &[[f64; 3]; 3], fixed_heading: bool) -> bool {
+    let m = rest;
     let det = if fixed_heading {
         m[0][0] * m[1][1] - m[0][1] * m[1][0]
     } else {
@@ -112,10 +121,11 @@ fn singular(info: &[[f64; 3]; 3], fixed_heading: bool) -> bool {
             + m[0][1] * (m[1][2] * m[2][0] - m[1][0] * m[2][2])
             + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
     };
+    let w = whole;
     let scale = if fixed_heading {
-        m[0][0] * m[1][1]
+        w[0][0] * w[1][1]
     } else {
-        m[0][0] * m[1][1] * m[2][2]
+        w[0][0] * w[1][1] * w[2][2]
     };
     det.is_nan() || det <= SINGULAR_RATIO * scale
 }
@@ -165,7 +175,7 @@ pub fn rests_on_one_reading(
                     rest[u][v] -= ju * jv;
                 }
             }
-            singular(&rest, fixed_heading)
+            singular(&rest, &info, fixed_heading)
         })
     })
 }
@@ -223,7 +233,7 @@ pub fn rests_on_one_wall(
                 rest[*v][*u] -= acc[k] as f64;
             }
         }
-        singular(&rest, fixed_heading)
+        singular(&rest, &info, fixed_heading)
     })
 }
 
@@ -434,6 +444,28 @@ mod tests {
         // What rests on one reading rests on one wall.
         let three = obs_at(&plan, &pose, &[-FRAC_PI_2 - 0.3, -FRAC_PI_2 + 0.4, 0.2]);
         assert!(rests_on_one_wall(&plan, &three, &pose, true, 0.09));
+    }
+
+    /// The readings of a site-level episode that answered 5.9 cm off (plan 1000065, K = 10,
+    /// `--site site`): three on one wall of a 6.8 m square, two on the next, the heading
+    /// unknown. The position across the second wall rests on its two readings alone; the
+    /// rounding residue the subtraction leaves must not hide that.
+    #[test]
+    fn a_direction_resting_on_one_wall_is_found_across_rounding() {
+        let plan = rect_about_origin(6.8, 6.8);
+        let pose = Pose2::new(-2.2137468, 0.4935022, 0.17146479);
+        let step = core::f32::consts::TAU / 54.0;
+        let mut o = Observations::new();
+        for (i, r) in [
+            (3, 5.8398485),
+            (8, 3.2613099),
+            (13, 2.9232314),
+            (18, 1.8525529),
+            (23, 1.2392758),
+        ] {
+            o.push(Measurement::new(i as f32 * step, r)).unwrap();
+        }
+        assert!(rests_on_one_wall(&plan, &o, &pose, false, 0.09));
     }
 
     /// Readings that hit the plan's walls exactly have a variance factor near 0; moving
