@@ -168,7 +168,16 @@ const PAGE_JS: &str = include_str!("page.js");
 /// [`load_trajectory`]): the trajectory embedded as JSON, the page's CSS and JavaScript
 /// inline. The same trajectory gives the same bytes.
 pub fn render_page(t: &Trajectory, source: &str) -> Result<String> {
-    let data = serde_json::to_string(t).context("serialising the trajectory")?;
+    let mut value = serde_json::to_value(t).context("serialising the trajectory")?;
+    // The door walls as indices: the plan's `openings` is a 64-bit mask, and JavaScript's
+    // numbers hold 53 bits exactly, so a door on a wall above index 52 would be lost there.
+    let doors: Vec<usize> = (0..t.plan.len())
+        .filter(|&i| t.plan.is_opening(i))
+        .collect();
+    if let Some(plan) = value.get_mut("plan").and_then(|p| p.as_object_mut()) {
+        plan.insert("doors".into(), serde_json::json!(doors));
+    }
+    let data = serde_json::to_string(&value).context("serialising the trajectory")?;
     // Inside <script> only "</" could end the element early; "<\/" is the same JSON string.
     let data = data.replace("</", "<\\/");
     let title = format!(
@@ -217,6 +226,29 @@ mod tests {
             std::env::temp_dir().join(format!("activesense-inspect-{name}-{}", std::process::id()));
         std::fs::create_dir_all(&d).unwrap();
         d
+    }
+
+    /// The page names the door walls by index: a door on wall 60 of a 62-wall room is
+    /// bit 60 of the plan's `openings`, which a JavaScript number cannot hold.
+    #[test]
+    fn the_page_lists_door_walls_past_the_53_bits_of_a_javascript_number() {
+        let policy = LearntPolicy::load(&default_policy_path(1), 1).unwrap();
+        let spec = EpisodeSpec::new(plans::TEST_SEEDS.start + 5, AgentKind::Learnt);
+        let mut t = record_episode(&spec, &policy);
+        let n = 62;
+        let ring: Vec<[f32; 2]> = (0..n)
+            .map(|i| {
+                let a = std::f32::consts::TAU * i as f32 / n as f32;
+                [10.0 * a.cos(), 10.0 * a.sin()]
+            })
+            .collect();
+        let openings = (1u64 << 1) | (1u64 << 60);
+        t.plan = activesense_core::FloorPlan::from_parts(&ring, &[], openings).unwrap();
+        let page = render_page(&t, "doors.json").unwrap();
+        assert!(
+            page.contains("\"doors\":[1,60]"),
+            "door walls listed by index"
+        );
     }
 
     #[test]

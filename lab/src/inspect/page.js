@@ -91,11 +91,10 @@ window.addEventListener("error", function (e) {
       s = e;
     });
   }
-  // Door openings (bit i of `openings`: wall i is a door), drawn as a dashed gap.
+  // Door openings (`doors`: the door walls' indices, added by the page's writer; the
+  // plan's 64-bit `openings` mask does not fit a JavaScript number), drawn as a dashed gap.
   function drawDoors(ctx, plan, P) {
-    var o = plan.openings || 0;
-    for (var i = 0; i < plan.vertices.length && o > 0; i++) {
-      if (Math.floor(o / Math.pow(2, i)) % 2 !== 1) continue;
+    (plan.doors || []).forEach(function (i) {
       var a = plan.vertices[i], b = plan.vertices[nextOf(plan, i)];
       var p0 = P(a[0], a[1]), p1 = P(b[0], b[1]);
       ctx.strokeStyle = "#ffffff"; ctx.lineWidth = 4; ctx.setLineDash([]);
@@ -103,7 +102,7 @@ window.addEventListener("error", function (e) {
       ctx.strokeStyle = "#222"; ctx.lineWidth = 1; ctx.setLineDash([4, 3]);
       ctx.beginPath(); ctx.moveTo(p0[0], p0[1]); ctx.lineTo(p1[0], p1[1]); ctx.stroke();
       ctx.setLineDash([]);
-    }
+    });
   }
   function drawPose(ctx, P, pose, colour, r) {
     var c = P(pose.x, pose.y);
