@@ -38,9 +38,12 @@ use crate::world::geometry::Pose2;
 use crate::world::symmetry::{symmetry_order, SymmetryTolerance};
 use serde::{Deserialize, Serialize};
 
+mod aim;
 mod answer;
 pub mod runner;
 mod termination;
+
+pub use aim::{AIM_CANDIDATES, AIM_MAX_INCIDENCE, AIM_MAX_RANGE};
 
 use crate::episode::Termination;
 

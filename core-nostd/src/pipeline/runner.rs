@@ -42,7 +42,14 @@ pub struct EpisodeRunner {
     /// Rotations since the last measurement (for the never-stall rule).
     rotations_in_a_row: u16,
     heading_offset: f32,
+    /// The bearing the stop lacks a reading at ([`Pipeline::aim`]), if any.
+    aim: Option<u16>,
+    /// Aimed bearings whose reading returned nothing (not aimed at again).
+    aim_missed: heapless::Vec<u16, AIM_MISSES>,
 }
+
+/// Aimed bearings without a return remembered per episode; past it the runner stops aiming.
+const AIM_MISSES: usize = 8;
 
 impl Default for EpisodeRunner {
     fn default() -> Self {
@@ -68,6 +75,8 @@ impl EpisodeRunner {
             no_returns: 0,
             rotations_in_a_row: 0,
             heading_offset: 0.0,
+            aim: None,
+            aim_missed: heapless::Vec::new(),
         }
     }
 
@@ -82,6 +91,8 @@ impl EpisodeRunner {
         self.no_returns = 0;
         self.rotations_in_a_row = 0;
         self.heading_offset = params.heading();
+        self.aim = None;
+        self.aim_missed.clear();
         Ok(())
     }
 
@@ -105,13 +116,24 @@ impl EpisodeRunner {
     /// The policy's next action; `None` once the episode is over. **Never stall:** after a
     /// whole turn of rotations without a measurement ([`Self::stall_limit`]) the next action
     /// is a measurement whatever the policy says: every bearing has passed, so turning on
-    /// cannot show the policy anything new, and a reading can still help. (The policy is
-    /// asked all the same, so a stateful or random policy's stream stays as it was.)
+    /// cannot show the policy anything new, and a reading can still help. **Aim:** while the
+    /// confident stop lacks a reading along some direction ([`Pipeline::aim`]) the runner
+    /// turns the shortest way to the bearing that gives it and measures there. (The policy
+    /// is asked all the same, so a stateful or random policy's stream stays as it was.)
     pub fn decide(&self, policy: &mut dyn Policy) -> Option<Action> {
         if self.is_over() {
             return None;
         }
         let action = policy.act(&self.input());
+        if let Some(target) = self.aim {
+            let n = self.state.config.steps_per_turn.max(1) as i32;
+            let ahead = (target as i32 - self.state.bearing_index as i32).rem_euclid(n);
+            return Some(match ahead {
+                0 => Action::Measure,
+                a if a <= n / 2 => Action::RotateLeft,
+                _ => Action::RotateRight,
+            });
+        }
         Some(
             if action != Action::Measure && self.rotations_in_a_row >= self.stall_limit() {
                 Action::Measure
@@ -152,18 +174,49 @@ impl EpisodeRunner {
                 // no return (the localizer refuses it).
                 if self.pipeline.measure(self.state.bearing(), range) {
                     self.stop = self.pipeline.should_stop();
+                    self.aim_after(true);
                     Booked::Vote
                 } else {
                     self.no_returns = self.no_returns.saturating_add(1);
+                    self.aim_after(false);
                     Booked::NoReturn
                 }
             }
             (Action::Measure, None) => {
                 self.no_returns = self.no_returns.saturating_add(1);
+                self.aim_after(false);
                 Booked::NoReturn
             }
             _ => Booked::Rotation,
         })
+    }
+
+    /// After a measurement: the bearing the stop lacks a reading at, if any. An aimed
+    /// reading that returned nothing is remembered and not aimed at again; after
+    /// [`AIM_MISSES`] of them the runner leaves the bearings to the policy.
+    fn aim_after(&mut self, voted: bool) {
+        if self.stop.is_some() {
+            self.aim = None;
+            return;
+        }
+        let here = self.state.bearing_index;
+        if !voted {
+            // A reading that voted nothing changed nothing the aim rests on; only an
+            // aimed bearing that returned nothing is struck off.
+            if self.aim != Some(here) {
+                return;
+            }
+            if self.aim_missed.push(here).is_err() {
+                self.aim = None;
+                return;
+            }
+        }
+        let missed = &self.aim_missed;
+        self.aim = self
+            .pipeline
+            .aim(self.state.config.steps_per_turn, here, &|k| {
+                missed.contains(&k)
+            });
     }
 
     /// Ends the episode: the coarse estimate and its refinement.

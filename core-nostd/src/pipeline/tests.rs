@@ -2,8 +2,10 @@
 //! register, and the calibrated stop's answer and threshold.
 
 use super::*;
+use crate::episode::{Action, Observation};
 use crate::fixtures::l_room_8x6;
 use crate::limits::DEFAULT_STOP_RISK;
+use crate::policy::{Policy, PolicyInput};
 use crate::stop::StopModel;
 use crate::world::geometry::unit;
 
@@ -255,4 +257,78 @@ fn confident_stop_follows_the_stop_risk() {
     let after = p.refine(&plan).unwrap();
     assert_eq!(after, fresh.refine(&plan).unwrap());
     assert_ne!(after.fit.log_likelihood, kept.fit.log_likelihood);
+}
+
+/// A policy that reads a fan of three neighbouring bearings and then turns back and forth
+/// at its edge: with the heading known every answer from its readings rests on the wall
+/// the fan hits, and only the runner's aim ([`Pipeline::aim`]) can get the confident
+/// stop the second wall it asks for.
+struct Fan;
+
+impl Policy for Fan {
+    fn act(&mut self, input: &PolicyInput<'_>) -> Action {
+        let step = EpisodeConfig::DEFAULT.rot_step();
+        let k = crate::world::math::round(input.bearing / step) as i32;
+        match k {
+            0..=2 if input.measurements as i32 <= k => Action::Measure,
+            0..=2 => Action::RotateLeft,
+            _ => Action::RotateRight,
+        }
+    }
+}
+
+#[test]
+fn the_runner_aims_at_the_wall_the_stop_lacks() {
+    use crate::pipeline::runner::EpisodeRunner;
+    use crate::registration::precision::rests_on_one_wall;
+    let plan = l_room_8x6();
+    let truth = Pose2::new(-1.3, -0.6, 0.4);
+    let params = EpisodeParams {
+        rot_bins: 1,
+        known_heading: Some(truth.theta),
+        ..confident_params(truth, DEFAULT_STOP_RISK)
+    };
+    let mut runner = EpisodeRunner::new_empty();
+    runner.start(&plan, &params).unwrap();
+    let mut fan = Fan;
+    while let Some(action) = runner.decide(&mut fan) {
+        let range = (action == Action::Measure)
+            .then(|| {
+                let b = runner.state().bearing();
+                plan.ray_cast(truth.translation(), unit(truth.theta + b))
+            })
+            .flatten()
+            .map(|h| h.range);
+        runner
+            .observe(action, &Observation { range, scan: 0 })
+            .unwrap();
+    }
+    let obs = runner.pipeline().observations();
+    let fan_only = Observations::from_slice(
+        &obs.readings()
+            .take(3)
+            .map(|(b, r)| Measurement::new(b, r))
+            .collect::<heapless::Vec<_, 3>>(),
+    )
+    .unwrap();
+    assert!(rests_on_one_wall(
+        &plan,
+        &fan_only,
+        &truth,
+        true,
+        crate::stop::PRECISION_GATE
+    ));
+    assert_eq!(
+        runner.stop(),
+        Some(Stop::Confident),
+        "aimed readings let it stop"
+    );
+    assert!(obs.len() > 3 && obs.len() <= 8, "{} readings", obs.len());
+    assert!(!rests_on_one_wall(
+        &plan,
+        obs,
+        &truth,
+        true,
+        crate::stop::PRECISION_GATE
+    ));
 }

@@ -88,17 +88,7 @@ fn explained_row_on(
         return None;
     }
     let n = plan.outward_normal(hit.wall);
-    let c = abs(n.x * d.x + n.y * d.y).max(MIN_COS_INCIDENCE) as f64;
-    let perp = n.x * -d.y + n.y * d.x;
-    Some((
-        hit.wall,
-        residual,
-        [
-            -(n.x as f64) / c,
-            -(n.y as f64) / c,
-            -(hit.range as f64) * perp as f64 / c,
-        ],
-    ))
+    Some((hit.wall, residual, planned_row(n, d, hit.range)))
 }
 
 /// True when `rest`, what is left of the information matrix `whole` with some readings
@@ -197,44 +187,101 @@ pub fn rests_on_one_wall(
     fixed_heading: bool,
     gate: f32,
 ) -> bool {
-    let a = pose.translation();
-    let mut per_wall = [[0.0f32; 6]; crate::limits::MAX_VERTICES];
-    let mut info = [[0.0f64; 3]; 3];
-    let mut used = 0usize;
-    for p in obs.pts.iter() {
-        let Some((wall, _, j)) = explained_row_on(plan, a, pose.theta, p, gate) else {
-            continue;
+    WallInformation::of(plan, obs, pose, gate).walls_alone(fixed_heading) > 0
+}
+
+/// The information of the readings a pose explains, whole and per wall: what
+/// [`rests_on_one_wall`] tests, and what [`crate::pipeline::aim`] adds a planned reading
+/// to.
+pub struct WallInformation {
+    /// Per wall, the upper triangle ([`UPPER`]) of its readings' `Σ JᵢᵀJᵢ`.
+    per_wall: [[f32; 6]; crate::limits::MAX_VERTICES],
+    /// `Σ JᵢᵀJᵢ` over every explained reading.
+    info: [[f64; 3]; 3],
+    /// Explained readings.
+    used: usize,
+}
+
+impl WallInformation {
+    /// The readings of `obs` the pose explains (range residual within `gate`).
+    pub fn of(plan: &FloorPlan, obs: &Observations, pose: &Pose2, gate: f32) -> Self {
+        let a = pose.translation();
+        let mut w = WallInformation {
+            per_wall: [[0.0f32; 6]; crate::limits::MAX_VERTICES],
+            info: [[0.0f64; 3]; 3],
+            used: 0,
         };
-        let Some(acc) = per_wall.get_mut(wall) else {
-            continue;
+        for p in obs.pts.iter() {
+            if let Some((wall, _, j)) = explained_row_on(plan, a, pose.theta, p, gate) {
+                w.add(wall, &j);
+            }
+        }
+        w
+    }
+
+    /// Books one reading on `wall` with range derivatives `j`.
+    fn add(&mut self, wall: usize, j: &[f64; 3]) {
+        let Some(acc) = self.per_wall.get_mut(wall) else {
+            return;
         };
         for (u, ju) in j.iter().enumerate() {
             for (v, jv) in j.iter().enumerate() {
-                info[u][v] += ju * jv;
+                self.info[u][v] += ju * jv;
             }
         }
         for (k, (u, v)) in UPPER.iter().enumerate() {
             acc[k] += (j[*u] * j[*v]) as f32;
         }
-        used += 1;
+        self.used += 1;
     }
-    let unknowns = if fixed_heading { 2 } else { 3 };
-    if used <= unknowns {
-        return true;
+
+    /// The information with one more reading on `wall` (derivatives `j`): what a planned
+    /// reading would make of it.
+    pub fn with(&self, wall: usize, j: &[f64; 3]) -> Self {
+        let mut w = WallInformation {
+            per_wall: self.per_wall,
+            info: self.info,
+            used: self.used,
+        };
+        w.add(wall, j);
+        w
     }
-    per_wall.iter().any(|acc| {
-        if acc.iter().all(|&x| x == 0.0) {
-            return false;
+
+    /// How many walls some direction rests on alone: walls whose readings, left out, leave
+    /// a direction free. Too few readings for the unknowns count as `usize::MAX`.
+    pub fn walls_alone(&self, fixed_heading: bool) -> usize {
+        let unknowns = if fixed_heading { 2 } else { 3 };
+        if self.used <= unknowns {
+            return usize::MAX;
         }
-        let mut rest = info;
-        for (k, (u, v)) in UPPER.iter().enumerate() {
-            rest[*u][*v] -= acc[k] as f64;
-            if u != v {
-                rest[*v][*u] -= acc[k] as f64;
-            }
-        }
-        singular(&rest, &info, fixed_heading)
-    })
+        let info = &self.info;
+        self.per_wall
+            .iter()
+            .filter(|acc| acc.iter().any(|&x| x != 0.0))
+            .filter(|acc| {
+                let mut rest = *info;
+                for (k, (u, v)) in UPPER.iter().enumerate() {
+                    rest[*u][*v] -= acc[k] as f64;
+                    if u != v {
+                        rest[*v][*u] -= acc[k] as f64;
+                    }
+                }
+                singular(&rest, info, fixed_heading)
+            })
+            .count()
+    }
+}
+
+/// The range derivatives `∂ρ/∂(x, y, θ)` of a planned reading along the model direction
+/// `d` from `a` onto `wall` (outward normal `n`) at range `range` (see the module docs).
+pub fn planned_row(n: Vec2, d: Vec2, range: f32) -> [f64; 3] {
+    let c = abs(n.x * d.x + n.y * d.y).max(MIN_COS_INCIDENCE) as f64;
+    let perp = n.x * -d.y + n.y * d.x;
+    [
+        -(n.x as f64) / c,
+        -(n.y as f64) / c,
+        -(range as f64) * perp as f64 / c,
+    ]
 }
 
 /// The upper triangle of a symmetric 3 × 3 matrix, row by row.

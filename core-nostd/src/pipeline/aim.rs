@@ -1,0 +1,106 @@
+//! The reading the stop lacks. Past the stop gate the calibrated stop refuses any answer
+//! with a direction that rests on one wall ([`crate::registration::precision::rests_on_one_wall`]):
+//! a wall off its drawn line, or furniture read as the wall, would move it unseen. No policy
+//! was trained on that rule, and a fixed-step policy may turn for the rest of the episode
+//! without ever reading a second wall along that direction (heading known, plan 1000033: the
+//! far wall 16.5 m away, seventeen readings, none along it, the action limit). So once the
+//! kept refinement rests on one wall, the runner aims: it turns to the nearest encoder
+//! bearing whose ray, at that refinement, reaches a wall that leaves fewer directions resting
+//! on one wall, and measures there ([`crate::pipeline::runner::EpisodeRunner::decide`]).
+//!
+//! **Only with the heading known (K = 1).** With it unknown, the refinement a few readings
+//! in is often one of several modes; rays planned on it hit other walls than planned, each
+//! aim costs a turn of rotations, and the episode runs out of actions: on the 1000 test
+//! plans (EDM only, learnt, K = 10, the stop tables of the time) aiming took the right
+//! answers from 0.985 to 0.956 on plans, 0.858 to 0.763 furnished and 0.414 to 0.321 on
+//! building sites (0.980, 0.817 and 0.365 when aiming only above a peak mass of 0.5), while
+//! at K = 1 it took them from 0.960 to 0.988, 0.784 to 0.823 and 0.371 to 0.368 at a lower
+//! cost (0.615 → 0.541 on plans; `docs/EVALUATION.md`, "Aiming at the direction the stop
+//! lacks").
+//!
+//! Planned rays are cast on the plan at the refined pose, so they are a prediction: the
+//! reading may hit furniture, or return nothing (glass, an open door). A bearing whose
+//! reading returned nothing is not aimed at again; one that returned is in the readings and
+//! is not a candidate either. The search runs once per reading, only while the refinement
+//! rests on one wall (when the rival check is skipped, [`Pipeline::should_stop`]): at most
+//! [`AIM_CANDIDATES`] rays and a 3 × 3 determinant per wall read for each.
+
+use super::Pipeline;
+use crate::episode::Termination;
+use crate::registration::precision::{planned_row, WallInformation};
+use crate::stop;
+use crate::world::geometry::{rotate, unit};
+use crate::world::math::{abs, cos, wrap_angle, TAU};
+
+/// Most encoder bearings the search tries (evenly spread over the turn).
+pub const AIM_CANDIDATES: u16 = 72;
+/// Steepest incidence of a planned ray (rad): reflectorless EDMs lose grazing returns, and
+/// the simulated one returns nothing beyond 75° (`docs/WORLD.md`).
+pub const AIM_MAX_INCIDENCE: f32 = 60.0 * core::f32::consts::PI / 180.0;
+/// Longest planned ray (m).
+pub const AIM_MAX_RANGE: f32 = 40.0;
+
+impl Pipeline {
+    /// The encoder bearing (index in `[0, steps_per_turn)`) to measure next, or `None`
+    /// when the stop does not lack a direction or no bearing gives it one. `from` is the
+    /// current bearing (ties go to the fewest rotations), `missed(k)` marks bearings whose
+    /// aimed reading returned nothing.
+    pub fn aim(&self, steps_per_turn: u16, from: u16, missed: &dyn Fn(u16) -> bool) -> Option<u16> {
+        // Not under the oracle (the paper's rule stops on coarse success, not on this
+        // stop); under the action limit as under the confident stop, so that what the
+        // calibration's episodes read is what a confident episode reads. Only with the
+        // heading known: see the module docs.
+        if self.params.termination == Termination::Oracle
+            || !self.params.heading_known()
+            || self.stop_gate().is_none()
+        {
+            return None;
+        }
+        let (key, refinement) = self.last_refinement?;
+        if key != self.refinement_key() {
+            return None;
+        }
+        let pose = refinement.registration.pose;
+        let fixed = self.params.heading_known();
+        let now = WallInformation::of(&self.plan, &self.observations, &pose, stop::PRECISION_GATE);
+        let alone = now.walls_alone(fixed);
+        if alone == 0 {
+            return None;
+        }
+        let n = steps_per_turn.max(1);
+        let stride = n.div_ceil(AIM_CANDIDATES);
+        let step = TAU / n as f32;
+        let cos_max = cos(AIM_MAX_INCIDENCE);
+        let a = pose.translation();
+        let mut best: Option<(usize, u16, u16)> = None;
+        for k in (0..n).step_by(stride as usize) {
+            let bearing = k as f32 * step;
+            let read = self
+                .observations
+                .readings()
+                .any(|(b, _)| abs(wrap_angle(b - bearing)) < 0.5 * step);
+            if read || missed(k) {
+                continue;
+            }
+            let d = rotate(unit(bearing), pose.theta);
+            let Some(hit) = self.plan.ray_cast(a, d) else {
+                continue;
+            };
+            let nrm = self.plan.outward_normal(hit.wall);
+            if abs(nrm.x * d.x + nrm.y * d.y) < cos_max || hit.range > AIM_MAX_RANGE {
+                continue;
+            }
+            let after = now
+                .with(hit.wall, &planned_row(nrm, d, hit.range))
+                .walls_alone(fixed);
+            let turn = {
+                let diff = (k as i32 - from as i32).rem_euclid(n as i32) as u16;
+                diff.min(n - diff)
+            };
+            if after < alone && best.is_none_or(|(s, t, _)| (after, turn) < (s, t)) {
+                best = Some((after, turn, k));
+            }
+        }
+        best.map(|(_, _, k)| k)
+    }
+}
