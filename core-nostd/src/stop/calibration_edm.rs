@@ -33,7 +33,7 @@ pub const MODELS: &[StopModel] = &[
             1.786712,
         ],
         bias: 2.580027,
-        thresholds: [1e-5, 1e-5, 0.00523897, 0.0005170082, 0.5227887],
+        thresholds: [1e-5, 1e-5, 0.00523897, 0.18151404, 0.5227887],
         agent_tables: [
             Some(AgentTable {
                 agent: AgentKind::Learnt,
@@ -75,21 +75,21 @@ pub const MODELS: &[StopModel] = &[
             1.5747788,
         ],
         bias: 1.880882,
-        thresholds: [1e-5, 1e-5, 0.0022864572, 0.00077149033, 0.05951973],
+        thresholds: [1e-5, 1e-5, 0.0022864572, 0.016440379, 0.05951973],
         agent_tables: [
             Some(AgentTable {
                 agent: AgentKind::Learnt,
                 thresholds: [
                     0.00041130523,
                     0.0005633099,
-                    0.0005170082,
+                    0.0037174583,
                     0.0045411168,
                     0.17639796,
                 ],
             }),
             Some(AgentTable {
                 agent: AgentKind::Heuristic1,
-                thresholds: [1e-5, 0.00086496206, 0.0022864572, 0.009280659, 0.3124831],
+                thresholds: [1e-5, 0.00086496206, 0.0022864572, 0.050137315, 0.3124831],
             }),
         ],
     },
