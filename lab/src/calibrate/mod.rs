@@ -344,10 +344,9 @@ fn candidate_thresholds() -> impl Iterator<Item = f32> {
 /// twenty (`docs/EVALUATION.md`, "A stated risk kept with 95 % confidence").
 pub const UPPER_BOUND_Z: f64 = 1.645;
 
-/// The share of a site level's calibration episodes its threshold for a stated risk must
-/// answer (stop at) for that level to set the risk's row of the table
-/// ([`threshold_table`]): a risk kept on a level only by refusing most of its setups
-/// there is not kept at the price of every other level's answers.
+/// The share of a site level's episodes its threshold for a stated risk must answer for
+/// the level to set that row ([`threshold_table`]): a risk kept on one level only by
+/// refusing most setups there is not kept at the price of every other level's answers.
 pub const MIN_ANSWERED_SHARE: f64 = 0.5;
 
 /// The threshold table of `model` ([`StopModel::thresholds`]) from the fitting episodes:
@@ -365,9 +364,8 @@ pub const MIN_ANSWERED_SHARE: f64 = 0.5;
 /// walls 3–6 cm off their lines move answers past the 5 cm tolerance unseen: every
 /// threshold of theirs failed, and the instrument would never answer anywhere);
 /// `docs/EVALUATION.md` says where the stated risk is not kept. Nor does a level whose
-/// threshold keeps it only by answering fewer than [`MIN_ANSWERED_SHARE`] of that level's
-/// episodes: building sites at K = 10 kept 1 % by answering one setup in ten, and set the
-/// threshold that left a fifth of the plan-level setups unanswered.
+/// threshold answers fewer than [`MIN_ANSWERED_SHARE`] of its episodes (sites at K = 10
+/// kept 1 % answering one setup in ten, and left a fifth of the plan setups unanswered).
 /// Fitted on the pooled episodes, the EDM-only stop stated 1 % and answered wrongly in 1.6 %
 /// of the answers in furnished rooms (`docs/EVALUATION.md`, "Rooms that are not their
 /// plans").
