@@ -800,6 +800,12 @@ pub(crate) mod tests {
         assert_eq!(b.perturbations(4, 200), 1);
         assert_eq!(Budget::EXHAUSTIVE.perturbations(16, 200), 16);
         assert_eq!(Budget::end_of_episode(false).perturbations(16, 40), 4);
+        // Without the heading the per-reading search shrinks from the ninth reading on.
+        let k10 = Budget::per_reading(false);
+        assert_eq!(k10.perturbations(16, 8), 16);
+        assert_eq!(k10.perturbations(16, 9), 15);
+        assert_eq!(k10.perturbations(16, 16), 8);
+        assert_eq!(Budget::per_reading(true).perturbations(16, 10), 16);
     }
 
     fn at(x: f32, y: f32, theta: f32) -> Refinement {
