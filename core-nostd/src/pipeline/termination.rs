@@ -6,6 +6,7 @@
 use super::{Answer, Pipeline, Stop, StopPoint};
 use crate::episode::Termination;
 use crate::localization::CellIndex;
+use crate::registration::precision::WallLeverage;
 use crate::registration::refine::{self, Budget, Refinement};
 use crate::registration::Observability;
 use crate::stop::rivals::{self, RivalCheck};
@@ -263,6 +264,8 @@ impl Pipeline {
             }),
             rival_margin,
             precision: self.answer_precision(&pose),
+            leverage: WallLeverage::of(&self.plan, &self.observations, &pose, stop::PRECISION_GATE)
+                .worst(self.params.heading_known()),
         })
     }
 

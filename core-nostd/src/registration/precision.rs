@@ -17,6 +17,7 @@
 //! number. Nothing here panics or allocates.
 
 use super::*;
+use crate::world::floorplan::RayHit;
 
 /// The covariance of a registered AgentPose.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -188,6 +189,166 @@ pub fn rests_on_one_wall(
     gate: f32,
 ) -> bool {
     WallInformation::of(plan, obs, pose, gate).walls_alone(fixed_heading) > 0
+}
+
+/// How an as-built wall offset would carry into the answer: the information of the readings
+/// a pose explains and, per wall, `Σ Jᵀ Δρ` for that wall moved one metre along its outward
+/// normal, its two neighbours turning about their far corners (the corners it shares move
+/// with it). [`WallLeverage::worst`] is the largest position shift over the walls, per
+/// metre of offset, from the least-squares fit of the readings.
+///
+/// **Why.** On building sites (`--site site`, one wall 3–6 cm off its line) most confident
+/// wrong answers with the heading known were 5–7 cm off with every reading explained and
+/// no direction resting on one wall: the readings lay on the moved wall and on its two
+/// neighbours near the shared corners, which move with it, so the fit followed the offset
+/// (`activesense episode --seed 1000241 --rot-bins 1 --instrument edm --site site
+/// --termination confident`: walls 5, 6, 6 and 7, wall 6 moved 5.8 cm, the answer 5.4 cm
+/// off at 0.04 % risk). [`crate::pipeline::aim`] aims at the bearing that lowers it and the
+/// calibrated stop reads it ([`crate::stop::StopFeatures::leverage`]). One accumulator of
+/// three `f32` per wall (768 B of stack at [`crate::limits::MAX_VERTICES`] walls).
+pub struct WallLeverage {
+    /// `Σ JᵢᵀJᵢ` over every explained reading.
+    info: [[f64; 3]; 3],
+    /// Per wall, `Σ Jᵢᵀ ∂ρᵢ/∂offset` of that wall's offset.
+    per_wall: [[f32; 3]; crate::limits::MAX_VERTICES],
+    /// Explained readings.
+    used: usize,
+}
+
+impl WallLeverage {
+    /// The readings of `obs` the pose explains (range residual within `gate`).
+    pub fn of(plan: &FloorPlan, obs: &Observations, pose: &Pose2, gate: f32) -> Self {
+        let a = pose.translation();
+        let mut w = WallLeverage {
+            info: [[0.0f64; 3]; 3],
+            per_wall: [[0.0f32; 3]; crate::limits::MAX_VERTICES],
+            used: 0,
+        };
+        for p in obs.pts.iter() {
+            let d = rotate(p.d, pose.theta);
+            let Some(hit) = plan.ray_cast(a, d) else {
+                continue;
+            };
+            if abs(length(p.s) - hit.range) > gate {
+                continue;
+            }
+            w.add(plan, d, &hit);
+        }
+        w
+    }
+
+    /// With one more reading along the model direction `d` that hits `hit`: what a planned
+    /// reading would make of it.
+    pub fn with(&self, plan: &FloorPlan, d: Vec2, hit: &RayHit) -> Self {
+        let mut w = WallLeverage {
+            info: self.info,
+            per_wall: self.per_wall,
+            used: self.used,
+        };
+        w.add(plan, d, hit);
+        w
+    }
+
+    /// Books one reading along `d` that hits `hit`: its range grows by `1 / cos(incidence)`
+    /// per metre its wall moves out, and by the share of a neighbour's move that reaches
+    /// the hit point (linear along the wall: all of it at the shared corner, none at the
+    /// far one) projected on its own wall's normal.
+    fn add(&mut self, plan: &FloorPlan, d: Vec2, hit: &RayHit) {
+        let wall = hit.wall;
+        let n = plan.outward_normal(wall);
+        let row = planned_row(n, d, hit.range);
+        let c = abs(n.x * d.x + n.y * d.y).max(MIN_COS_INCIDENCE);
+        for (u, ju) in row.iter().enumerate() {
+            for (v, jv) in row.iter().enumerate() {
+                self.info[u][v] += ju * jv;
+            }
+        }
+        self.used += 1;
+        let (a, b) = plan.wall(wall);
+        let e = b - a;
+        let along = ((hit.point.x - a.x) * e.x + (hit.point.y - a.y) * e.y)
+            / (e.x * e.x + e.y * e.y).max(1e-12);
+        let t = along.clamp(0.0, 1.0);
+        let (next, prev) = (plan.next(wall), plan.prev(wall));
+        let (nn, np) = (plan.outward_normal(next), plan.outward_normal(prev));
+        for (moved, dr) in [
+            (wall, 1.0 / c),
+            (next, t * (n.x * nn.x + n.y * nn.y) / c),
+            (prev, (1.0 - t) * (n.x * np.x + n.y * np.y) / c),
+        ] {
+            if let Some(acc) = self.per_wall.get_mut(moved) {
+                for (k, jk) in row.iter().enumerate() {
+                    acc[k] += *jk as f32 * dr;
+                }
+            }
+        }
+    }
+
+    /// The position shift `(dx, dy)` (m) of the least-squares answer per metre of `wall`'s
+    /// offset; `None` when the readings leave a direction free (or are too few).
+    pub fn shift(&self, wall: usize, fixed_heading: bool) -> Option<(f64, f64)> {
+        let acc = self.per_wall.get(wall)?;
+        let unknowns = if fixed_heading { 2 } else { 3 };
+        if self.used <= unknowns {
+            return None;
+        }
+        let m = &self.info;
+        let g = [acc[0] as f64, acc[1] as f64, acc[2] as f64];
+        if fixed_heading {
+            let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
+            if det.is_nan() || det <= SINGULAR_RATIO * m[0][0] * m[1][1] {
+                return None;
+            }
+            return Some((
+                (m[1][1] * g[0] - m[0][1] * g[1]) / det,
+                (m[0][0] * g[1] - m[1][0] * g[0]) / det,
+            ));
+        }
+        let det = det3(m);
+        if det.is_nan() || det <= SINGULAR_RATIO * m[0][0] * m[1][1] * m[2][2] {
+            return None;
+        }
+        // Cramer's rule for the two position unknowns.
+        let solve = |col: usize| {
+            let mut mm = *m;
+            for (row, gr) in mm.iter_mut().zip(g) {
+                row[col] = gr;
+            }
+            det3(&mm) / det
+        };
+        Some((solve(0), solve(1)))
+    }
+
+    /// The largest position shift over the walls read (m per metre of one wall's offset);
+    /// infinite when the readings leave a direction free.
+    pub fn worst(&self, fixed_heading: bool) -> f32 {
+        let mut worst = 0.0f32;
+        for (wall, acc) in self.per_wall.iter().enumerate() {
+            if acc.iter().all(|&x| x == 0.0) {
+                continue;
+            }
+            let Some((dx, dy)) = self.shift(wall, fixed_heading) else {
+                return f32::INFINITY;
+            };
+            let l = sqrt((dx * dx + dy * dy) as f32);
+            if l.is_nan() {
+                return f32::INFINITY;
+            }
+            worst = worst.max(l);
+        }
+        if self.used == 0 {
+            f32::INFINITY
+        } else {
+            worst
+        }
+    }
+}
+
+/// Determinant of a 3 × 3 matrix.
+fn det3(m: &[[f64; 3]; 3]) -> f64 {
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        + m[0][1] * (m[1][2] * m[2][0] - m[1][0] * m[2][2])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
 }
 
 /// The information of the readings a pose explains, whole and per wall: what
