@@ -28,8 +28,9 @@
 //! reading may hit furniture, or return nothing (glass, an open door). A bearing whose
 //! reading returned nothing is not aimed at again; one that returned is in the readings and
 //! is not a candidate either. The search runs once per reading, only while the refinement
-//! rests on one wall (when the rival check is skipped, [`Pipeline::should_stop`]): at most
-//! [`AIM_CANDIDATES`] rays and a 3 × 3 determinant per wall read for each.
+//! rests on one wall (when the rival check is skipped, [`Pipeline::should_stop`]) or its
+//! leverage is above [`AIM_LEVERAGE`]: at most [`AIM_CANDIDATES`] rays and a 3 × 3
+//! determinant (or a 2 × 2 solve) per wall read for each.
 
 use super::Pipeline;
 use crate::episode::Termination;

@@ -709,6 +709,106 @@ mod tests {
         assert!(cov.variance_factor > 5.0, "{}", cov.variance_factor);
     }
 
+    /// The leverage's first-order model against the plan itself: move one wall of a
+    /// pentagon 1 mm out (its two corners with it, its neighbours turning about their far
+    /// corners, as `--site site` builds a wall off its line), ray-cast the readings again,
+    /// and solve the least-squares shift of the position; it is what [`WallLeverage::shift`]
+    /// says, for every wall, the heading known and not.
+    #[test]
+    fn the_leverage_is_the_least_squares_shift_of_a_moved_wall() {
+        let corners = [
+            v2(-5.0, -4.0),
+            v2(5.0, -4.0),
+            v2(6.0, 2.0),
+            v2(0.0, 5.0),
+            v2(-6.0, 1.0),
+        ];
+        let plan = FloorPlan::new(&corners).unwrap();
+        let pose = Pose2::new(0.5, 0.2, 0.3);
+        let bearings = [0.1, 0.9, 1.7, 2.4, 3.1, 3.9, 4.6, 5.4, 5.9];
+        let obs = obs_at(&plan, &pose, &bearings);
+        let lever = WallLeverage::of(&plan, &obs, &pose, 0.09);
+        let eps = 1e-3f32;
+        for wall in 0..corners.len() {
+            let n = plan.outward_normal(wall);
+            let mut moved = corners;
+            moved[wall] = moved[wall] + n * eps;
+            let next = (wall + 1) % corners.len();
+            moved[next] = moved[next] + n * eps;
+            let moved = FloorPlan::new(&moved).unwrap();
+            for fixed in [true, false] {
+                let (mut info, mut g) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
+                for &b in &bearings {
+                    let d = rotate(unit(b), pose.theta);
+                    let hit = plan.ray_cast(pose.translation(), d).unwrap();
+                    let after = moved.ray_cast(pose.translation(), d).unwrap();
+                    let j = planned_row(plan.outward_normal(hit.wall), d, hit.range);
+                    let dr = ((after.range - hit.range) / eps) as f64;
+                    for u in 0..3 {
+                        g[u] += j[u] * dr;
+                        for v in 0..3 {
+                            info[u][v] += j[u] * j[v];
+                        }
+                    }
+                }
+                let k = if fixed { 2 } else { 3 };
+                // Gaussian elimination on the k × k system.
+                let mut a = [[0.0f64; 4]; 3];
+                for u in 0..k {
+                    a[u][..k].copy_from_slice(&info[u][..k]);
+                    a[u][3] = g[u];
+                }
+                for c in 0..k {
+                    for r in c + 1..k {
+                        let f = a[r][c] / a[c][c];
+                        for q in c..4 {
+                            a[r][q] -= f * a[c][q];
+                        }
+                    }
+                }
+                let mut x = [0.0f64; 3];
+                for c in (0..k).rev() {
+                    let tail: f64 = (c + 1..k).map(|q| a[c][q] * x[q]).sum();
+                    x[c] = (a[c][3] - tail) / a[c][c];
+                }
+                let (dx, dy) = lever.shift(wall, fixed).unwrap();
+                let err = ((dx - x[0]).powi(2) + (dy - x[1]).powi(2)).sqrt();
+                assert!(err < 0.02, "wall {wall} fixed {fixed}: {dx} {dy} vs {x:?}");
+            }
+        }
+        let worst = lever.worst(true);
+        assert!(worst > 0.2 && worst < 1.0, "{worst}");
+    }
+
+    /// Readings on one wall and its two neighbours near the shared corners follow that
+    /// wall's offset (leverage about 1); a reading on the far wall halves it.
+    #[test]
+    fn readings_by_one_walls_corners_follow_its_offset_and_the_far_wall_checks_it() {
+        let plan = rect_about_origin(12.0, 8.0);
+        let pose = Pose2::new(3.0, 0.5, 0.0);
+        // The east wall (x = 6) straight ahead, and the south and north walls close to it.
+        let near = obs_at(&plan, &pose, &[0.0, -1.3, 1.3, -1.2]);
+        assert!(!rests_on_one_wall(&plan, &near, &pose, true, 0.09));
+        let lever = WallLeverage::of(&plan, &near, &pose, 0.09);
+        let before = lever.worst(true);
+        assert!(before > 0.9, "{before}");
+        let d = unit(PI);
+        let hit = plan.ray_cast(pose.translation(), d).unwrap();
+        let after = lever.with(&plan, d, &hit).worst(true);
+        assert!(after < 0.6, "{before} → {after}");
+        // Too few readings, or a free direction: infinite.
+        let two = obs_at(&plan, &pose, &[0.0, 1.3]);
+        assert_eq!(
+            WallLeverage::of(&plan, &two, &pose, 0.09).worst(true),
+            f32::INFINITY
+        );
+        let fan = obs_at(&plan, &pose, &[-0.2, 0.0, 0.2]);
+        assert_eq!(
+            WallLeverage::of(&plan, &fan, &pose, 0.09).worst(true),
+            f32::INFINITY
+        );
+    }
+
     #[test]
     fn perpendicular_walls_give_sigma_per_axis() {
         // Heading known, one reading onto the east wall, one onto the north wall, both
