@@ -21,15 +21,14 @@
 //! **The wall leverage.** Once no direction rests on one wall, a direction may still rest on
 //! one wall and the corners it shares with its neighbours, which move with it; the runner
 //! then aims at the bearing that lowers the answer's [`WallLeverage`] below
-//! [`AIM_LEVERAGE`], and the calibrated stop reads the leverage
-//! ([`crate::stop::StopFeatures::leverage`]).
+//! [`stop::MAX_WALL_LEVERAGE`], above which the stop does not answer.
 //!
 //! Planned rays are cast on the plan at the refined pose, so they are a prediction: the
 //! reading may hit furniture, or return nothing (glass, an open door). A bearing whose
 //! reading returned nothing is not aimed at again; one that returned is in the readings and
 //! is not a candidate either. The search runs once per reading, only while the refinement
 //! rests on one wall (when the rival check is skipped, [`Pipeline::should_stop`]) or its
-//! leverage is above [`AIM_LEVERAGE`]: at most [`AIM_CANDIDATES`] rays and a 3 × 3
+//! leverage is above [`stop::MAX_WALL_LEVERAGE`]: at most [`AIM_CANDIDATES`] rays and a 3 × 3
 //! determinant (or a 2 × 2 solve) per wall read for each.
 
 use super::Pipeline;
@@ -46,13 +45,6 @@ pub const AIM_CANDIDATES: u16 = 72;
 pub const AIM_MAX_INCIDENCE: f32 = 60.0 * core::f32::consts::PI / 180.0;
 /// Longest planned ray (m).
 pub const AIM_MAX_RANGE: f32 = 40.0;
-/// Wall leverage ([`WallLeverage::worst`]) above which the runner aims at the bearing that
-/// lowers it most (within this bound if it can, then the fewest rotations), once no
-/// direction rests on one wall: a wall 5.5 cm off its line (the site level moves one by
-/// 3–6 cm) then moves the answer by up to 5 cm, the surveyor's tolerance. On 600
-/// validation plans' building sites (heading known, learnt) the confident wrong answers had
-/// leverages of 0.93–1.63 but two, the right ones a third of them above 0.9.
-pub const AIM_LEVERAGE: f32 = 0.9;
 
 impl Pipeline {
     /// The encoder bearing (index in `[0, steps_per_turn)`) to measure next, or `None`
@@ -85,7 +77,7 @@ impl Pipeline {
         } else {
             f32::INFINITY
         };
-        if alone == 0 && lever_now <= AIM_LEVERAGE {
+        if alone == 0 && lever_now <= stop::MAX_WALL_LEVERAGE {
             return None;
         }
         let n = steps_per_turn.max(1);
@@ -123,7 +115,11 @@ impl Pipeline {
                 (after < alone).then_some(after as f32)
             } else {
                 let after = lever.with(&self.plan, d, &hit).worst(fixed);
-                (after < lever_now).then_some(if after <= AIM_LEVERAGE { 0.0 } else { after })
+                (after < lever_now).then_some(if after <= stop::MAX_WALL_LEVERAGE {
+                    0.0
+                } else {
+                    after
+                })
             };
             if let Some(rank) = rank {
                 if best.is_none_or(|(r, t, _)| (rank, turn) < (r, t)) {

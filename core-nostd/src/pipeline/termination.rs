@@ -229,6 +229,20 @@ impl Pipeline {
         ) {
             return None;
         }
+        // With the heading known, nor while one wall's offset, its corners with it, would
+        // carry most of itself into the answer ([`stop::MAX_WALL_LEVERAGE`]).
+        if self.params.heading_known()
+            && WallLeverage::of(
+                &self.plan,
+                &self.observations,
+                &refined.registration.pose,
+                stop::PRECISION_GATE,
+            )
+            .worst(true)
+                > stop::MAX_WALL_LEVERAGE
+        {
+            return None;
+        }
         let grid = self.localizer.grid();
         let argmax = self.localizer.argmax()?;
         let answer = self.answer_cell(refined)?;
@@ -264,8 +278,6 @@ impl Pipeline {
             }),
             rival_margin,
             precision: self.answer_precision(&pose),
-            leverage: WallLeverage::of(&self.plan, &self.observations, &pose, stop::PRECISION_GATE)
-                .worst(self.params.heading_known()),
         })
     }
 

@@ -203,9 +203,10 @@ pub fn rests_on_one_wall(
 /// neighbours near the shared corners, which move with it, so the fit followed the offset
 /// (`activesense episode --seed 1000241 --rot-bins 1 --instrument edm --site site
 /// --termination confident`: walls 5, 6, 6 and 7, wall 6 moved 5.8 cm, the answer 5.4 cm
-/// off at 0.04 % risk). [`crate::pipeline::aim`] aims at the bearing that lowers it and the
-/// calibrated stop reads it ([`crate::stop::StopFeatures::leverage`]). One accumulator of
-/// three `f32` per wall (768 B of stack at [`crate::limits::MAX_VERTICES`] walls).
+/// off at 0.04 % risk). With the heading known the stop does not answer above
+/// [`crate::stop::MAX_WALL_LEVERAGE`], and [`crate::pipeline::aim`] aims at the bearing that
+/// lowers it. One accumulator of three `f32` per wall (768 B of stack at
+/// [`crate::limits::MAX_VERTICES`] walls).
 pub struct WallLeverage {
     /// `Σ JᵢᵀJᵢ` over every explained reading.
     info: [[f64; 3]; 3],

@@ -45,7 +45,7 @@ pub const GATE_PEAK_MASS: f32 = 0.1;
 pub const EDGE_SCALE: f32 = 0.02;
 
 /// Number of features of [`StopFeatures::to_vector`].
-pub const FEATURES: usize = 19;
+pub const FEATURES: usize = 18;
 
 /// Range noise (m) the answer's precision ([`StopFeatures::precision`]) is computed with: the
 /// EDM's own σ. Only the ratio between answers matters to the fitted model.
@@ -60,9 +60,25 @@ pub const PRECISION_GATE: f32 = 0.09;
 /// ([`rivals`]).
 pub const MARGIN_KNEE: f32 = 10.0;
 
-/// Bound of the wall-leverage feature ([`StopFeatures::leverage`]) on either side of 1:
-/// past 10 the answer follows a wall's offset tenfold, which is as bad as a free direction.
-pub const LEVERAGE_CAP: f32 = 10.0;
+/// Largest wall leverage ([`crate::registration::precision::WallLeverage::worst`]: how far
+/// the answer moves per metre of one wall's as-built offset, its corners moving with it)
+/// at which the stop answers with the heading known; above it the runner aims at the
+/// bearing that lowers it ([`crate::pipeline::aim`]).
+///
+/// **Why.** On building sites (`--site site` moves one wall 3–6 cm off its line) most
+/// confident wrong answers with the heading known were 5–7 cm off, every reading
+/// explained and no direction resting on one wall: the readings lay on the moved wall
+/// and on its neighbours near the shared corners, which move with it, so the fit followed
+/// the offset (`activesense episode --seed 1000241 --rot-bins 1 --instrument edm --site
+/// site --termination confident`: readings on walls 5, 6, 6 and 7, wall 6 moved 5.8 cm,
+/// the answer 5.4 cm off at a stated 0.04 %). Above 0.9 a wall 5.5 cm off carries the
+/// answer past the surveyor's 5 cm. On 600 validation plans' building sites (learnt, K = 1)
+/// all but two confident wrong answers had leverages of 0.93–1.63; a third of the right
+/// ones were above 0.9 too, and pay for the rule with a reading or two more. Tried as a
+/// stop feature instead (refitted tables), it changed nothing at K = 1 and cost right
+/// answers at K = 10 (`docs/EVALUATION.md`, "The wall leverage"). Only with the heading
+/// known, as aiming.
+pub const MAX_WALL_LEVERAGE: f32 = 0.9;
 
 /// Readings at which the stop score equals the estimate ([`stop_score`]).
 pub const SCORE_REFERENCE_READINGS: f32 = 8.0;
@@ -130,18 +146,6 @@ pub struct StopFeatures {
     /// when they leave a direction free.
     #[serde(default)]
     pub precision: Option<AnswerPrecision>,
-    /// How far the answer moves per metre of one wall's as-built offset, the largest over
-    /// the walls read ([`crate::registration::precision::WallLeverage::worst`]; infinite
-    /// when the readings leave a direction free).
-    ///
-    /// **Why the stop reads it.** Walls on a building site stand centimetres off their
-    /// lines and drag their corners along. Readings on one wall and its two neighbours
-    /// near the shared corners then agree with each other and with the plan at a pose that
-    /// follows the offset: on the site level with the heading known, most confident wrong
-    /// answers were 5–7 cm off with every reading explained. Neither the residuals nor the
-    /// precision show it; how much one wall's offset would move the answer does.
-    #[serde(default)]
-    pub leverage: f32,
 }
 
 /// Standard deviations of the answer from the information of the readings it explains
@@ -189,9 +193,8 @@ impl StopFeatures {
     /// itself, and the first unexplained reading of a rival is worth more than the rest.
     /// Then the answer's precision: whether it has none, and the logs of its position and
     /// heading standard deviations in units of the surveyor's tolerance (5 cm, 0.5°),
-    /// clamped to [10⁻³, 10]; the log of the residuals' variance factor clamped to
-    /// [0.1, 100] (0 without a precision); last, the log of the wall leverage clamped to
-    /// [1 / [`LEVERAGE_CAP`], [`LEVERAGE_CAP`]].
+    /// clamped to [10⁻³, 10]; last, the log of the residuals' variance factor clamped to
+    /// [0.1, 100] (0 without a precision).
     pub fn to_vector(&self) -> [f32; FEATURES] {
         let m = if self.rival_margin.is_nan() {
             0.0
@@ -230,11 +233,6 @@ impl StopFeatures {
                 } else {
                     p.variance_factor.clamp(0.1, 100.0)
                 })
-            }),
-            ln(if self.leverage.is_nan() {
-                LEVERAGE_CAP
-            } else {
-                self.leverage.clamp(1.0 / LEVERAGE_CAP, LEVERAGE_CAP)
             }),
         ]
     }
@@ -475,7 +473,6 @@ mod tests {
             agrees: true,
             rival_margin: 12.0,
             precision: None,
-            leverage: 0.5,
         }
     }
 
@@ -485,7 +482,7 @@ mod tests {
             rot_bins: 10,
             weights: [
                 -1.0, 0.0, 0.0, 2.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                0.0, 0.0, 0.0,
+                0.0, 0.0,
             ],
             bias: 0.5,
             thresholds: [0.001, 0.003, 0.01, 0.03, 0.1],
@@ -508,31 +505,15 @@ mod tests {
         assert_eq!(extreme.risk(&features(1.0, 500, 500)), 0.0);
     }
 
-    /// The last feature is the log of the wall leverage, clamped to [0.1, 10]: a free
-    /// direction (infinite) and a NaN read as the cap, never as a non-finite input.
-    #[test]
-    fn the_leverage_feature_is_its_clamped_log() {
-        let last = |l: f32| {
-            let mut f = features(0.9, 8, 8);
-            f.leverage = l;
-            f.to_vector()[FEATURES - 1]
-        };
-        assert_eq!(last(1.0), 0.0);
-        assert!((last(0.5) - 0.5f32.ln()).abs() < 1e-6);
-        assert!((last(f32::INFINITY) - LEVERAGE_CAP.ln()).abs() < 1e-6);
-        assert!((last(f32::NAN) - LEVERAGE_CAP.ln()).abs() < 1e-6);
-        assert!((last(0.0) + LEVERAGE_CAP.ln()).abs() < 1e-6);
-    }
-
     #[test]
     fn the_precision_features_are_logs_of_the_tolerance_ratio() {
         let last4 = |f: &StopFeatures| {
             let v = f.to_vector();
             [
-                v[FEATURES - 5],
                 v[FEATURES - 4],
                 v[FEATURES - 3],
                 v[FEATURES - 2],
+                v[FEATURES - 1],
             ]
         };
         let precision = |position: f32, heading: f32, variance_factor: f32| AnswerPrecision {

@@ -764,7 +764,6 @@ mod tests {
                 agrees: true,
                 rival_margin: 0.0,
                 precision: None,
-                leverage: 0.5,
             },
             wrong,
             position_error: 0.0,
