@@ -347,6 +347,35 @@ mod tests {
         }
     }
 
+    /// The building-site episode the wall-leverage rule comes from
+    /// (`activesense_core::stop::MAX_WALL_LEVERAGE`): heading known, EDM only, wall 6 of
+    /// plan 1000241 5.8 cm off its line. Its first four readings lay on that wall and on its
+    /// two neighbours near the corners that move with it, and the stop answered 5.4 cm off
+    /// at a stated 0.04 %; now it aims at a farther wall and answers within the surveyor's
+    /// 5 cm.
+    #[test]
+    fn a_wall_off_its_line_does_not_carry_the_answer_with_its_corners() {
+        let instrument = InstrumentProfile::Edm;
+        let mut policies = Policies::default();
+        policies.load_int8_for(instrument, &[], &[1]).unwrap();
+        let mut spec = episode::EpisodeSpec::new(1_000_241, AgentKind::LearntInt8);
+        spec.rot_bins = 1;
+        spec.config.instrument = instrument;
+        spec.termination = episode::Termination::Confident;
+        spec.sensor.site = crate::world::site::SiteLevel::Site;
+        let t = run_agent_episode(&spec, &policies).unwrap();
+        assert_eq!(t.end, episode::EndReason::Confident);
+        let errors = t.outcome.errors.unwrap();
+        let tolerance = activesense_core::registration::pose_distance::Tolerance::SURVEYOR;
+        assert!(
+            errors.position <= tolerance.position_m,
+            "{} m off after {} readings",
+            errors.position,
+            t.summary.measurements
+        );
+        assert!(t.summary.measurements > 4, "{}", t.summary.measurements);
+    }
+
     fn path_of_blob(instrument: InstrumentProfile, k: u8) -> PathBuf {
         default_policy_path_for(instrument, k).with_file_name("policy.q8")
     }
