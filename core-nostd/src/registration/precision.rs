@@ -733,9 +733,9 @@ mod tests {
         for wall in 0..corners.len() {
             let n = plan.outward_normal(wall);
             let mut moved = corners;
-            moved[wall] = moved[wall] + n * eps;
+            moved[wall] += n * eps;
             let next = (wall + 1) % corners.len();
-            moved[next] = moved[next] + n * eps;
+            moved[next] += n * eps;
             let moved = FloorPlan::new(&moved).unwrap();
             for fixed in [true, false] {
                 let (mut info, mut g) = ([[0.0f64; 3]; 3], [0.0f64; 3]);
@@ -762,8 +762,9 @@ mod tests {
                 for c in 0..k {
                     for r in c + 1..k {
                         let f = a[r][c] / a[c][c];
-                        for q in c..4 {
-                            a[r][q] -= f * a[c][q];
+                        let pivot = a[c];
+                        for (x, p) in a[r].iter_mut().zip(pivot).skip(c) {
+                            *x -= f * p;
                         }
                     }
                 }
