@@ -351,10 +351,16 @@ mod tests {
     /// (`activesense_core::stop::MAX_WALL_LEVERAGE`): heading known, EDM only, wall 6 of
     /// plan 1000241 5.8 cm off its line. Its first four readings lay on that wall and on its
     /// two neighbours near the corners that move with it, and the stop answered 5.4 cm off
-    /// at a stated 0.04 %; now it aims at a farther wall and answers within the surveyor's
-    /// 5 cm.
+    /// at a stated 0.04 %. Now it does not answer on them; it answers once the readings'
+    /// leverage is within the bound, which caps how much of the offset passes into the
+    /// answer (0.9 of 5.8 cm, plus the EDM's noise), not that none does: this episode still
+    /// ends about 6 cm off, outside the surveyor's 5 cm, and is one of the four wrong
+    /// answers left on the test plans' building sites at K = 1 (`docs/EVALUATION.md`,
+    /// "The wall leverage").
     #[test]
     fn a_wall_off_its_line_does_not_carry_the_answer_with_its_corners() {
+        use activesense_core::registration::precision::WallLeverage;
+        use activesense_core::registration::{Measurement, Observations};
         let instrument = InstrumentProfile::Edm;
         let mut policies = Policies::default();
         policies.load_int8_for(instrument, &[], &[1]).unwrap();
@@ -365,15 +371,27 @@ mod tests {
         spec.sensor.site = crate::world::site::SiteLevel::Site;
         let t = run_agent_episode(&spec, &policies).unwrap();
         assert_eq!(t.end, episode::EndReason::Confident);
-        let errors = t.outcome.errors.unwrap();
-        let tolerance = activesense_core::registration::pose_distance::Tolerance::SURVEYOR;
+        assert!(t.summary.measurements > 4, "{}", t.summary.measurements);
+        let mut obs = Observations::new();
+        for s in &t.steps {
+            if let Some(r) = s.range {
+                obs.push(Measurement::new(s.bearing, r)).unwrap();
+            }
+        }
+        let pose = t.outcome.refined.unwrap().pose;
+        let lever = WallLeverage::of(&t.plan, &obs, &pose, activesense_core::stop::PRECISION_GATE)
+            .worst(true);
         assert!(
-            errors.position <= tolerance.position_m,
+            lever <= activesense_core::stop::MAX_WALL_LEVERAGE,
+            "{lever}"
+        );
+        let errors = t.outcome.errors.unwrap();
+        assert!(
+            errors.position < 0.9 * 0.058 + 0.02,
             "{} m off after {} readings",
             errors.position,
             t.summary.measurements
         );
-        assert!(t.summary.measurements > 4, "{}", t.summary.measurements);
     }
 
     fn path_of_blob(instrument: InstrumentProfile, k: u8) -> PathBuf {
