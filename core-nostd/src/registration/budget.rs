@@ -213,9 +213,10 @@ impl Budget {
 /// **Why.** The device's worst K = 10 measurement update was a fresh search at nine readings
 /// (EDM only, int8 learnt, plan 1000007: the carried re-fit left the new reading unexplained
 /// four readings in a row), 43.5 M instructions against the 40 M budget. From eight the
-/// worst of the benchmark's 20 episodes is 37.8 M, the mean 7.6 → 7.3 M, and on the 1000
-/// test plans the no-oracle rows moved by at most two episodes per row at every site level
-/// (`docs/EVALUATION.md`, "The device's worst update, within budget").
+/// worst of the benchmark's 20 episodes was 37.8 M and the mean 7.6 → 7.3 M (the tables of
+/// the time; `results/mcu-bench/` has today's), and on the 1000 test plans the no-oracle
+/// rows moved by at most two episodes per row at every site level (`docs/EVALUATION.md`,
+/// "The device's worst update, within budget").
 pub const PER_READING_FULL_READINGS_UNKNOWN_HEADING: u8 = 8;
 
 /// ICP iterations per annealing round of the per-reading refinement past
