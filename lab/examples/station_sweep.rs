@@ -6,7 +6,9 @@
 //! station session against the GeoCOM simulator's world in process (the TCP path gives the
 //! same answers bit for bit: `tests/tests/geocom.rs`), on `--instrument` (default `edm`,
 //! what GeoCOM instruments are), calibrated stop at `--stop-risk` (default 1 %), K = 10.
-//! Prints, per agent: right, wrong (of answered), unanswered, measurements, cost.
+//! Prints, per agent: right, wrong (of answered), unanswered, measurements, cost; on stderr
+//! each wrong and each unanswered setup (room, episode seed, and for the unanswered the
+//! measurements and actions it took).
 //!
 //! `--site furnished|site` plays each room furnished or as a building site (the simulator's
 //! world; the station is given the plan, `docs/WORLD.md`, "Sites").
@@ -123,6 +125,12 @@ fn main() -> anyhow::Result<()> {
                 meas += u64::from(o.state.measurements);
                 cost += f64::from(o.state.cost);
                 if o.stop.is_none() {
+                    eprintln!(
+                        "unanswered: {label}, episode seed {e}, {}, {} measurements, {} actions",
+                        agent.name(),
+                        o.state.measurements,
+                        o.state.actions
+                    );
                     unanswered += 1;
                     continue;
                 }

@@ -104,15 +104,32 @@ impl Default for RangeModel {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RangeFit {
     /// `Σᵢ ln((1−ε)·N(rᵢ; 0, σ²) + ε/R)` over all readings, `rᵢ` the measured minus the
-    /// ray-cast range at the pose (a ray that meets no wall explains nothing).
+    /// ray-cast range at the pose (a ray that meets no wall explains nothing); `ln(1/R)`
+    /// for a reading [`beyond_door`].
     pub log_likelihood: f32,
-    /// Readings within 3σ of the ray-cast range.
+    /// Readings within 3σ of the ray-cast range, or [`beyond_door`].
     pub explained: u16,
     /// Distinct bearings among the readings (a bearing measured twice is one direction).
     pub bearings: u16,
     /// Distinct bearings with at least one explained reading: the independent checks the
     /// pose passed (repeating a range at one bearing re-checks the same wall point).
     pub explained_bearings: u16,
+}
+
+/// How far short of a door a reading through it may end and still count as through it
+/// (m): 3σ of the default [`RangeModel`], for a jamb the beam grazes or a door leaf ajar.
+pub const DOOR_MARGIN: f32 = 0.09;
+
+/// True when the plan predicts this reading "beyond a door": from `origin` along unit `dir`
+/// the ray leaves the room through a door opening before any solid wall
+/// ([`FloorPlan::door_exit`]) and the `measured` range reaches the door (less
+/// [`DOOR_MARGIN`]). Such a reading is explained, and no wall is its correspondent: it
+/// neither confirms nor pulls a pose (a station set up by a door would otherwise see
+/// every reading through it as a misfit, and never answer). False for a plan without doors.
+#[inline]
+pub fn beyond_door(plan: &FloorPlan, origin: Vec2, dir: Vec2, measured: f32) -> bool {
+    plan.door_exit(origin, dir)
+        .is_some_and(|door| measured >= door - DOOR_MARGIN)
 }
 
 /// [`RangeFit`] of every reading of `obs` at AgentPose `pose` (excluded or not: the
@@ -133,8 +150,17 @@ pub fn range_fit(
     let rot = |v: Vec2| v2(cos_h * v.x - sin_h * v.y, sin_h * v.x + cos_h * v.y);
     // Whether reading i was explained (for the per-bearing counts).
     let mut ok = [false; MAX_OBSERVATIONS];
+    // A reading through a door of the plan, at least as far as the door: the plan says
+    // "beyond", not where, so it is explained at a flat density over the EDM's range.
+    let beyond = 1.0 / model.max_range.max(1e-6);
     for (i, p) in obs.pts.iter().enumerate() {
         let measured = length(p.s);
+        if beyond_door(plan, a, rot(p.d), measured) {
+            explained += 1;
+            ok[i] = true;
+            log_likelihood += ln(beyond);
+            continue;
+        }
         let predicted = plan.first_hit(a, rot(p.d));
         let density = match predicted {
             Some(r) => {
@@ -184,7 +210,7 @@ pub fn unexplained_readings<const N: usize>(
     let (sin_h, cos_h) = (sin(pose.theta), cos(pose.theta));
     let rot = |v: Vec2| v2(cos_h * v.x - sin_h * v.y, sin_h * v.x + cos_h * v.y);
     for (i, p) in obs.pts.iter().enumerate() {
-        if skip.contains(&(i as u16)) {
+        if skip.contains(&(i as u16)) || beyond_door(plan, a, rot(p.d), length(p.s)) {
             continue;
         }
         let z = match plan.first_hit(a, rot(p.d)) {

@@ -653,7 +653,7 @@ pub(crate) mod tests {
     use crate::fixtures::{centred_rect, l_room_8x6};
     use crate::localization::LocalizerConfig;
     use crate::registration::Measurement;
-    use crate::world::geometry::unit;
+    use crate::world::geometry::{length, unit, v2};
 
     /// Three readings with the heading known, the last one an outlier: the plain
     /// registration is dragged off by it, the refinement leaves it out.
@@ -865,6 +865,69 @@ pub(crate) mod tests {
         let e = at(3.0, 3.0, 0.0);
         keep_alternate(&mut alt, &a, &e, &icp);
         assert_eq!(alt, [Some(a), Some(d), Some(c)], "the oldest (b) dropped");
+    }
+
+    /// A station set up by a door: readings through it end somewhere behind the door,
+    /// where the plan draws nothing. They are what the plan predicts ("beyond the door"):
+    /// explained, never a leave-out candidate, and the refinement still finds the station
+    /// (before, every such reading was a misfit and the stop never answered: the
+    /// station sweep's column-and-door room, `docs/EVALUATION.md`, "Readings through a door").
+    #[test]
+    fn readings_through_a_door_are_explained_and_do_not_pull_the_fit() {
+        // 6 × 4 m, a 1 m door in the bottom wall (x = 1..2), the station 0.4 m above it.
+        let outline = [v2(0.0, 0.0), v2(6.0, 0.0), v2(6.0, 4.0), v2(0.0, 4.0)];
+        let door = (v2(2.0, 0.0), v2(1.0, 0.0));
+        let plan = FloorPlan::with_columns_and_doors(&outline, &[], &[door], 0.02)
+            .unwrap()
+            .centered();
+        let truth = Pose2::new(-1.5, -1.6, 0.3);
+        let mut obs = Observations::new();
+        let mut through = 0;
+        for k in 0..12 {
+            let b = -3.0 + 0.5 * k as f32;
+            let d = unit(truth.theta + b);
+            let r = match plan.door_exit(truth.translation(), d) {
+                // The corridor's far wall, 2.5 m behind the door.
+                Some(t) => {
+                    through += 1;
+                    t + 2.5
+                }
+                None => plan.ray_cast(truth.translation(), d).unwrap().range,
+            };
+            obs.push(Measurement::new(b, r)).unwrap();
+        }
+        assert!(through >= 3, "{through} readings through the door");
+        let model = RangeModel::default();
+        let fit = registration::range_fit(&plan, &obs, &truth, &model);
+        assert_eq!(fit.explained, 12);
+        let none = registration::unexplained_readings::<4>(&plan, &obs, &truth, &model, &[]);
+        assert!(none.is_empty(), "{none:?}");
+        // Short of the door (someone standing in it) is not through it.
+        let mut blocked = obs.clone();
+        let d = (0..12)
+            .map(|k| -3.0 + 0.5 * k as f32)
+            .find(|&b| {
+                plan.door_exit(truth.translation(), unit(truth.theta + b))
+                    .is_some()
+            })
+            .unwrap();
+        let t = plan
+            .door_exit(truth.translation(), unit(truth.theta + d))
+            .unwrap();
+        blocked.push(Measurement::new(d, t - 0.3)).unwrap();
+        assert_eq!(
+            registration::range_fit(&plan, &blocked, &truth, &model).explained,
+            12
+        );
+        // The refinement from a start 0.2 m and 3° off lands on the station.
+        let start = Pose2::new(truth.x + 0.15, truth.y - 0.13, truth.theta + 0.05);
+        let r = registration::register(&plan, &obs, &start, &AnnealParams::default()).unwrap();
+        let e = r.pose.translation() - truth.translation();
+        assert!(
+            length(e) < 0.01 && (r.pose.theta - truth.theta).abs() < 0.005,
+            "{:?} against {truth:?}",
+            r.pose
+        );
     }
 
     #[test]

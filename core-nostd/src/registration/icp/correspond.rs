@@ -144,8 +144,20 @@ pub(in crate::registration) fn match_pairs(
     pairs.clear();
     let sc = heading.to(pose.theta).sin_cos();
     let sight = Sightlines::new(plan, pose.translation());
+    let doors = plan.openings() != 0;
     for (i, o) in obs.pts.iter().enumerate() {
         if params.excludes(i) {
+            continue;
+        }
+        // A reading through a door has no wall to pair with (`beyond_door`).
+        if doors
+            && crate::registration::beyond_door(
+                plan,
+                pose.translation(),
+                v2(sc.1 * o.d.x - sc.0 * o.d.y, sc.0 * o.d.x + sc.1 * o.d.y),
+                length(o.s),
+            )
+        {
             continue;
         }
         // Same capacity as the observation set.

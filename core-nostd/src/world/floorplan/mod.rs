@@ -526,6 +526,37 @@ impl FloorPlan {
         })
     }
 
+    /// Where a ray leaves the room through a door opening: the distance along it to the
+    /// first opening it crosses before any solid wall, or `None` (a solid wall comes first,
+    /// or the plan has no doors: one test of the mask). What the plan predicts there is
+    /// not a range but "beyond this": the registration counts a reading at least that far
+    /// as explained, and pairs it with no wall (`registration::beyond_door`).
+    pub fn door_exit(&self, origin: Vec2, dir: Vec2) -> Option<f32> {
+        if self.openings == 0 {
+            return None;
+        }
+        let mut door: Option<f32> = None;
+        for i in (0..self.len()).filter(|&i| self.is_opening(i)) {
+            let (a, b) = self.wall(i);
+            let e = b - a;
+            let denom = cross(dir, e);
+            if abs(denom) < 1e-12 {
+                continue;
+            }
+            let w = a - origin;
+            let t = cross(w, e) / denom;
+            let u = cross(w, dir) / denom;
+            if t > 1e-6 && (0.0..=1.0).contains(&u) && door.is_none_or(|h| t < h) {
+                door = Some(t);
+            }
+        }
+        let door = door?;
+        match self.first_hit(origin, dir) {
+            Some(wall) if wall <= door => None,
+            _ => Some(door),
+        }
+    }
+
     /// The range of [`FloorPlan::ray_cast`]'s hit alone (the same arithmetic, without the
     /// incidence angle and hit point): the visibility test of every ICP correspondence
     /// needs no more.

@@ -231,6 +231,24 @@ fn a_ray_passes_through_a_door() {
 }
 
 #[test]
+fn door_exit_is_where_a_ray_leaves_through_a_door() {
+    let p = room_with_column_and_door();
+    // Straight down from (1.5, 2): the door, 2 m away (its line sits within 5 mm of y = 0).
+    let t = p.door_exit(v2(1.5, 2.0), unit(-FRAC_PI_2)).unwrap();
+    assert!((t - 2.0).abs() < 0.01, "{t}");
+    // Beside it the bottom wall comes first; towards the column, the column.
+    assert_eq!(p.door_exit(v2(2.5, 2.0), unit(-FRAC_PI_2)), None);
+    assert_eq!(p.door_exit(v2(1.0, 2.0), unit(0.0)), None);
+    // From above the column, aimed at the door's middle: the column is met first.
+    let d = v2(1.5, 0.0) - v2(4.0, 3.0);
+    let aimed = d / crate::world::geometry::length(d);
+    assert!(p.first_hit(v2(4.0, 3.0), aimed).unwrap() < 1.0);
+    assert_eq!(p.door_exit(v2(4.0, 3.0), aimed), None);
+    // A plan without doors never has an exit.
+    assert_eq!(rect(6.0, 4.0).door_exit(v2(0.0, 0.0), unit(0.3)), None);
+}
+
+#[test]
 fn nearest_point_skips_a_door() {
     let p = room_with_column_and_door();
     // Just above the door's middle: the door is nearest, but it is no wall; the jambs are.
