@@ -217,6 +217,13 @@ impl Pipeline {
         refined: &Refinement,
         rival_margin: f32,
     ) -> Option<StopFeatures> {
+        // With the heading unknown, no answer that says the room does not match its plan
+        // ([`stop::room_mismatch`]): a pose can fit a subset of the readings elsewhere.
+        if !self.params.heading_known()
+            && stop::room_mismatch(refined.fit.bearings, refined.fit.explained_bearings)
+        {
+            return None;
+        }
         // No answer while a direction of it rests on one wall: a reading may be furniture,
         // not the wall, and a wall may stand off its drawn line; a second wall along each
         // direction shows either (`registration::precision::rests_on_one_wall`).

@@ -128,8 +128,12 @@ pub const DOOR_MARGIN: f32 = 0.09;
 /// every reading through it as a misfit, and never answer). False for a plan without doors.
 #[inline]
 pub fn beyond_door(plan: &FloorPlan, origin: Vec2, dir: Vec2, measured: f32) -> bool {
-    plan.door_exit(origin, dir)
-        .is_some_and(|door| measured >= door - DOOR_MARGIN)
+    // The mask first, inline: this runs for every reading of every fit, and generated
+    // plans (and most rooms) have no doors.
+    plan.openings() != 0
+        && plan
+            .door_exit(origin, dir)
+            .is_some_and(|door| measured >= door - DOOR_MARGIN)
 }
 
 /// [`RangeFit`] of every reading of `obs` at AgentPose `pose` (excluded or not: the
