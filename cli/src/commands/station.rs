@@ -245,10 +245,10 @@ impl StationReport {
         client: &mut Client,
         frame: &PlanFrame,
         tie_break: Option<u8>,
-        risk: Option<f64>,
+        answer: &Answer,
         max_risk: f32,
-        mismatch: Option<&str>,
     ) -> Result<[f64; 4]> {
+        let (risk, mismatch) = (answer.risk, answer.mismatch.as_deref());
         let cands = self.candidates();
         if cands.is_empty() {
             bail!("no answer: nothing written to the instrument");
@@ -270,7 +270,10 @@ impl StationReport {
                 "the answer is not confident enough to write: {}, above the {} you accept (--stop-risk); nothing written",
                 match risk {
                     Some(r) => format!("the risk that it is wrong is {:.1} %", 100.0 * r),
-                    None => "the stop has no estimate of the risk that it is wrong".to_string(),
+                    None => match &answer.wall_reliance {
+                        Some(w) => format!("the stop does not answer while {w}"),
+                        None => "the stop has no estimate of the risk that it is wrong".to_string(),
+                    },
                 },
                 format_args!("{:.1} %", 100.0 * max_risk)
             );
@@ -442,9 +445,8 @@ pub fn station(a: &StationArgs) -> Result<StationReport> {
             inst.client(),
             &frame,
             a.tie_break,
-            answer.risk,
+            &answer,
             a.episode.stop_risk,
-            answer.mismatch.as_deref(),
         ))
     } else {
         None

@@ -5,7 +5,9 @@
 
 use super::{Answer, Reading, ReadingFit, MISMATCH_MIN_READINGS, MISMATCH_SHARE, PRECISION_GATE};
 use crate::world::planfile::PlanFrame;
-use activesense_core::registration::Measurement;
+use activesense_core::registration::precision::{WallInformation, WallLeverage};
+use activesense_core::registration::{Measurement, Observations};
+use activesense_core::stop::MAX_WALL_LEVERAGE;
 use activesense_core::{FloorPlan, Pose2};
 
 /// Compares every reading with the range the plan predicts from `pose` ([`ReadingFit`]) and,
@@ -105,11 +107,55 @@ pub(super) fn compare_with_plan(
     ));
 }
 
+/// With the heading given, why the calibrated stop would not answer from this geometry, in
+/// words (the two rules of `Pipeline::features_with`): a direction that rests on one wall's
+/// readings alone, or a wall whose offset from its drawn line would carry into the answer
+/// by more than [`MAX_WALL_LEVERAGE`]. `None` when neither holds, with the heading unknown
+/// (the stop then does not apply them), or with too few readings to tell (the precision
+/// says so already).
+///
+/// **Why.** Such an answer can agree with every reading and still sit centimetres off:
+/// the room's walls are not exactly where the plan draws them (`docs/EVALUATION.md`, "The
+/// wall leverage"). The surveyor is told which wall and what reading would settle it, not
+/// only that no risk is available.
+pub(super) fn wall_reliance(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    heading_known: bool,
+) -> Option<String> {
+    if !heading_known {
+        return None;
+    }
+    let alone = WallInformation::of(plan, obs, pose, PRECISION_GATE).walls_alone(true);
+    if alone == usize::MAX {
+        return None;
+    }
+    if alone > 0 {
+        return Some(
+            "one direction of the answer rests on the readings of a single wall: were that wall a few cm off its drawn line, the answer would be off by as much, and no reading would show it; take a reading on another wall along that direction".to_string(),
+        );
+    }
+    let lever = WallLeverage::of(plan, obs, pose, PRECISION_GATE);
+    let worst = lever.worst(true);
+    if worst <= MAX_WALL_LEVERAGE {
+        return None;
+    }
+    let (wall, shift) = (0..plan.len())
+        .filter_map(|w| lever.shift(w, true).map(|(dx, dy)| (w, dx.hypot(dy))))
+        .fold((0, 0.0f64), |b, c| if c.1 > b.1 { c } else { b });
+    Some(format!(
+        "the answer rests on wall {}'s drawn position: it moves {shift:.2} cm for every cm that wall stands off its line (the stop answers only below {MAX_WALL_LEVERAGE:.2}), and its neighbours' readings near the shared corners move with it; take a reading on a wall facing it",
+        wall + 1
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::{AnswerInput, ReadingFit};
     use super::*;
     use activesense_core::world::geometry::{rotate, unit, v2};
+    use std::f32::consts::{FRAC_PI_2, PI};
 
     /// A reading that hits a column of the plan is explained by the plan, and names the
     /// column's wall; without the column the same reading would be short of the far wall.
@@ -229,5 +275,68 @@ mod tests {
         let b = Answer::new(&input(&plain));
         assert_eq!(b.readings[0].fit, ReadingFit::Long);
         assert!(b.mismatch.is_some());
+    }
+
+    /// With the heading given, an answer whose geometry the stop does not answer says so in
+    /// words: a direction fixed by one wall alone; a wall whose offset carries into the
+    /// answer (the readings on it and on its neighbours near the shared corners); and once
+    /// a reading on the facing wall checks it, nothing. Not with the heading unknown.
+    #[test]
+    fn an_answer_that_rests_on_one_wall_says_which_and_what_would_settle_it() {
+        let answer = |plan: &FloorPlan, bearings: &[f32], heading_known: bool| {
+            let pose = Pose2::new(3.0, 0.3, 0.0);
+            let readings: Vec<Measurement> = bearings
+                .iter()
+                .map(|&b| {
+                    let hit = plan.ray_cast(pose.translation(), unit(b)).unwrap();
+                    Measurement::new(b, hit.range)
+                })
+                .collect();
+            let frame = PlanFrame::default();
+            Answer::new(&AnswerInput {
+                label: "walls".into(),
+                plan,
+                frame: &frame,
+                pose: Some(pose),
+                refined: true,
+                readings: &readings,
+                heading_known,
+                symmetry_order: 1,
+                stop_risk: None,
+                stop_tables: None,
+                truth: None,
+                hint: None,
+                range_sigma: 0.01,
+            })
+        };
+        // x by the east wall alone (two readings), y by the north and south walls.
+        let rect =
+            FloorPlan::new(&[v2(-6.0, -4.0), v2(6.0, -4.0), v2(6.0, 4.0), v2(-6.0, 4.0)]).unwrap();
+        let one = answer(&rect, &[0.0, 0.2, FRAC_PI_2, -FRAC_PI_2], true);
+        let words = one.wall_reliance.as_deref().unwrap_or_default();
+        assert!(words.contains("a single wall"), "{words}");
+        let text = one.to_text();
+        assert!(text.contains("RESTS ON ONE WALL"), "{text}");
+        assert!(text.contains("the stop does not answer while"), "{text}");
+        assert_eq!(
+            answer(&rect, &[0.0, 0.2, FRAC_PI_2, -FRAC_PI_2], false).wall_reliance,
+            None
+        );
+        // A room narrowing to the east: the slanting walls share their east corners with
+        // the east wall (wall 2), so readings near those corners move with its offset.
+        let narrowing =
+            FloorPlan::new(&[v2(-6.0, -4.0), v2(6.0, -2.0), v2(6.0, 2.0), v2(-6.0, 4.0)]).unwrap();
+        let lever = answer(&narrowing, &[0.0, -1.0, 1.0, -0.8], true);
+        let words = lever.wall_reliance.as_deref().unwrap_or_default();
+        assert!(
+            words.contains("rests on wall 2's drawn position"),
+            "{words}"
+        );
+        assert!(words.contains("a wall facing it"), "{words}");
+        // The west wall, facing it, checks it.
+        assert_eq!(
+            answer(&narrowing, &[0.0, -1.0, 1.0, -0.8, PI], true).wall_reliance,
+            None
+        );
     }
 }

@@ -160,11 +160,11 @@ pub enum ReadingFit {
 
 /// Share of readings that, once not explained by the plan at the answer, makes the answer
 /// say the room does not match its plan (with at least [`MISMATCH_MIN_READINGS`]).
-pub const MISMATCH_SHARE: f64 = 0.25;
+pub const MISMATCH_SHARE: f64 = activesense_core::stop::MISMATCH_SHARE as f64;
 
 /// Fewest unexplained readings that make the answer say the room does not match its plan
 /// (one stray return is the EDM's outlier rate at work, not a room unlike its plan).
-pub const MISMATCH_MIN_READINGS: usize = 2;
+pub const MISMATCH_MIN_READINGS: usize = activesense_core::stop::MISMATCH_MIN_READINGS as usize;
 
 /// Variance factor of the explained readings' residuals
 /// ([`PoseCovariance::variance_factor`]) above which the answer warns that they disagree
@@ -257,6 +257,12 @@ pub struct Answer {
     /// readings hit something not on the plan, near which walls).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mismatch: Option<String>,
+    /// With the heading given, when the answer rests on one wall's drawn position (a
+    /// direction fixed by one wall alone, or a wall whose offset would carry into it), that,
+    /// in words, with the reading that would settle it: the calibrated stop does not answer
+    /// such a geometry.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall_reliance: Option<String>,
 }
 
 /// What an [`Answer`] is built from.
@@ -361,6 +367,7 @@ impl Answer {
             heading_hint: i.hint,
             truth: None,
             mismatch: None,
+            wall_reliance: None,
         };
         let Some(pose) = i.pose else {
             return a;
@@ -368,6 +375,11 @@ impl Answer {
         fit::compare_with_plan(&mut a, i.plan, &pose, i.readings, frame);
         // Precision from the information matrix of the readings the pose explains.
         let obs = Observations::from_slice(i.readings).ok();
+        if i.refined {
+            a.wall_reliance = obs
+                .as_ref()
+                .and_then(|o| fit::wall_reliance(i.plan, o, &pose, i.heading_known));
+        }
         let cov = obs.as_ref().map(|o| {
             pose_covariance(
                 i.plan,

@@ -113,6 +113,9 @@ impl Answer {
         if let Some(m) = &self.mismatch {
             let _ = writeln!(s, "  ROOM DOES NOT MATCH THE PLAN: {m}");
         }
+        if let Some(w) = &self.wall_reliance {
+            let _ = writeln!(s, "  RESTS ON ONE WALL: {w}");
+        }
         let _ = writeln!(
             s,
             "  risk that this answer is wrong: {}",
@@ -121,6 +124,9 @@ impl Answer {
                     "{} (the smallest --stop-risk at which the calibrated stop answers with it)",
                     percent(r)
                 ),
+                None if self.wall_reliance.is_some() => {
+                    "not available (the stop does not answer while the answer rests on one wall: see above)".into()
+                }
                 None => "not available (belief below the stop's gate, or no registration)".into(),
             }
         );
