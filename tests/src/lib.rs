@@ -70,6 +70,24 @@ pub fn edm_only_on_site(s: &mut EpisodeSpec) {
     s.sensor.site = activesense_instrument::world::site::SiteLevel::Site;
 }
 
+/// An `adjust` for [`check_episodes_with`]: [`edm_only`] in the fixtures' room with a
+/// column and two doors (`cli/tests/fixtures/plans/features/column-door.geojson`): its
+/// readings through a door are explained and pair with no wall (`registration::beyond_door`)
+/// on the device as on the host. (Episode seed 7, the first of [`spec`]'s, stands 0.4 m
+/// from the west door and reads through it ten times.)
+pub fn edm_only_by_a_door(s: &mut EpisodeSpec) {
+    use activesense_instrument::world::planfile::{load_rooms, LoadOptions};
+    edm_only(s);
+    let file = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../cli/tests/fixtures/plans/features/column-door.geojson");
+    let room = load_rooms(&file, &LoadOptions::default())
+        .expect("the column-and-door fixture loads")
+        .remove(0)
+        .plan;
+    s.plan_seed = room.seed();
+    s.user_plan = Some(room);
+}
+
 /// The host's own episode for `s` (baseline, or the int8 policy built into the firmware).
 pub fn host_episode(s: &EpisodeSpec) -> Trajectory {
     let mut policies = Policies::default();

@@ -50,6 +50,27 @@ fn loopback_confident_stop_rule_matches_host() {
     l.close().unwrap();
 }
 
+/// By the doors of a plan: readings through them are explained on the device as on the
+/// host, and it takes the host's actions and stops where the host stops.
+#[test]
+fn loopback_episodes_by_a_door_match_host() {
+    let mut l = serial::open(&LinkSpec::Loopback, Duration::from_secs(30)).unwrap();
+    l.client.hello().unwrap();
+    assert!(check_episodes_with(&mut l.client, 3, 10, activesense_tests::edm_only_by_a_door) > 0);
+    l.close().unwrap();
+    // Some of those readings did go through a door.
+    let mut s = spec(0, 10);
+    activesense_tests::edm_only_by_a_door(&mut s);
+    let through = activesense_tests::host_episode(&s)
+        .steps
+        .iter()
+        .filter(|st| {
+            st.range_kind == Some(activesense_instrument::world::sensor::RangeKind::Behind)
+        })
+        .count();
+    assert!(through >= 3, "{through} readings through a door");
+}
+
 /// On a building site (readings off furniture, columns, people, a wall off its line) the
 /// device still takes the host's actions and stops where the host stops.
 #[test]

@@ -30,6 +30,8 @@ fn qemu_firmware_episodes_bit_identical_and_faults() {
     assert!(check_episodes_with(&mut l.client, 4, 10, activesense_tests::edm_only) > 0);
     // ... and on a cluttered site, where readings hit what the plan does not draw.
     assert!(check_episodes_with(&mut l.client, 3, 10, activesense_tests::edm_only_on_site) > 0);
+    // ... and by the doors of a plan, where readings go through them.
+    assert!(check_episodes_with(&mut l.client, 2, 10, activesense_tests::edm_only_by_a_door) > 0);
     fault_suite(&mut l.client);
     check_episodes(&mut l.client, 1, 10);
     // A policy uploaded into the firmware's RAM slot serves bit-identically; bad uploads
