@@ -361,15 +361,7 @@ mod tests {
     fn a_wall_off_its_line_does_not_carry_the_answer_with_its_corners() {
         use activesense_core::registration::precision::WallLeverage;
         use activesense_core::registration::{Measurement, Observations};
-        let instrument = InstrumentProfile::Edm;
-        let mut policies = Policies::default();
-        policies.load_int8_for(instrument, &[], &[1]).unwrap();
-        let mut spec = episode::EpisodeSpec::new(1_000_241, AgentKind::LearntInt8);
-        spec.rot_bins = 1;
-        spec.config.instrument = instrument;
-        spec.termination = episode::Termination::Confident;
-        spec.sensor.site = crate::world::site::SiteLevel::Site;
-        let t = run_agent_episode(&spec, &policies).unwrap();
+        let t = int8_episode_on_a_building_site(1_000_241, 1);
         assert_eq!(t.end, episode::EndReason::Confident);
         assert!(t.summary.measurements > 4, "{}", t.summary.measurements);
         let mut obs = Observations::new();
@@ -404,15 +396,7 @@ mod tests {
     #[test]
     fn an_answer_that_says_the_room_does_not_match_is_not_a_confident_one() {
         use activesense_core::registration::pose_distance::Tolerance;
-        let instrument = InstrumentProfile::Edm;
-        let mut policies = Policies::default();
-        policies.load_int8_for(instrument, &[], &[10]).unwrap();
-        let mut spec = episode::EpisodeSpec::new(1_001_405, AgentKind::LearntInt8);
-        spec.rot_bins = 10;
-        spec.config.instrument = instrument;
-        spec.termination = episode::Termination::Confident;
-        spec.sensor.site = crate::world::site::SiteLevel::Site;
-        let t = run_agent_episode(&spec, &policies).unwrap();
+        let t = int8_episode_on_a_building_site(1_001_405, 10);
         let right = t
             .outcome
             .errors
@@ -424,6 +408,22 @@ mod tests {
             t.outcome.errors
         );
         assert!(t.summary.measurements > 7, "{}", t.summary.measurements);
+    }
+
+    /// The EDM-only int8 policy's episode on plan `seed`'s building site (`--site site`),
+    /// calibrated stop at the default risk.
+    fn int8_episode_on_a_building_site(seed: u32, rot_bins: u8) -> episode::Trajectory {
+        let instrument = InstrumentProfile::Edm;
+        let mut policies = Policies::default();
+        policies
+            .load_int8_for(instrument, &[], &[rot_bins])
+            .unwrap();
+        let mut spec = episode::EpisodeSpec::new(seed, AgentKind::LearntInt8);
+        spec.rot_bins = rot_bins;
+        spec.config.instrument = instrument;
+        spec.termination = episode::Termination::Confident;
+        spec.sensor.site = crate::world::site::SiteLevel::Site;
+        run_agent_episode(&spec, &policies).unwrap()
     }
 
     fn path_of_blob(instrument: InstrumentProfile, k: u8) -> PathBuf {
