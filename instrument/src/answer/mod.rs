@@ -45,8 +45,9 @@ use std::f64::consts::PI;
 pub const PRECISION_SIGMA_FACTOR: f32 = 1.15;
 
 /// A reading counts toward the precision when its range residual at the answer is within
-/// this (m): the refinement's "explained" test (3 × its 3 cm σ).
-pub const PRECISION_GATE: f32 = 0.09;
+/// this (m): the stop's own gate (3 × the range model's 3 cm σ), so that the answer's
+/// precision and wall words read the readings the stop read.
+pub const PRECISION_GATE: f32 = activesense_core::stop::PRECISION_GATE;
 
 /// The heading convention, stated in every answer.
 pub const HEADING_CONVENTION: &str =
