@@ -8,7 +8,7 @@ use crate::episode::Termination;
 use crate::localization::CellIndex;
 use crate::registration::precision::WallLeverage;
 use crate::registration::refine::{self, Budget, Refinement};
-use crate::registration::Observability;
+use crate::registration::{Observability, RangeModel};
 use crate::stop::rivals::{self, RivalCheck};
 use crate::stop::{self, StopFeatures, StopModel};
 use crate::world::floorplan::FloorPlan;
@@ -221,6 +221,23 @@ impl Pipeline {
         // ([`stop::room_mismatch`]): a pose can fit a subset of the readings elsewhere.
         if !self.params.heading_known()
             && stop::room_mismatch(refined.fit.bearings, refined.fit.explained_bearings)
+        {
+            return None;
+        }
+        // Nor while the answer turned about the middle of the walls its readings hit
+        // explains them as well ([`stop::rivals::turned_image_rivals`]): a rival the belief
+        // may not hold.
+        if !self.params.heading_known()
+            && stop::rivals::turned_image_rivals(
+                &self.plan,
+                &self.observations,
+                &refined.registration.pose,
+                refined.fit.log_likelihood,
+                &RangeModel::default(),
+                &self.registration_params().icp,
+                self.order,
+                stop::PRECISION_GATE,
+            )
         {
             return None;
         }

@@ -136,6 +136,40 @@ pub fn beyond_door(plan: &FloorPlan, origin: Vec2, dir: Vec2, measured: f32) -> 
             .is_some_and(|door| measured >= door - DOOR_MARGIN)
 }
 
+/// The centre of the bounding box of the wall points that the readings explained at
+/// `pose` hit (ray-cast range within `gate` of the measured one; readings through a door
+/// hit no wall and are left out), or `None` with fewer than three such readings. A room
+/// whose readings all fall on the walls of one rectangle looks the same from the answer
+/// turned about this point by a half turn (a square: a quarter turn too), whatever the
+/// rest of the plan holds: [`crate::stop::rivals::turned_image_rivals`] turns it there.
+pub fn explained_hits_centre(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    gate: f32,
+) -> Option<Vec2> {
+    let origin = pose.translation();
+    let (mut lo, mut hi) = (
+        v2(f32::INFINITY, f32::INFINITY),
+        v2(f32::NEG_INFINITY, f32::NEG_INFINITY),
+    );
+    let turn = crate::world::geometry::Turn::new(pose.theta);
+    let mut hits = 0usize;
+    for p in obs.pts.iter() {
+        let dir = turn.apply(p.d);
+        let Some(t) = plan.first_hit(origin, dir) else {
+            continue;
+        };
+        if abs(length(p.s) - t) <= gate {
+            let q = origin + dir * t;
+            lo = v2(lo.x.min(q.x), lo.y.min(q.y));
+            hi = v2(hi.x.max(q.x), hi.y.max(q.y));
+            hits += 1;
+        }
+    }
+    (hits >= 3).then(|| (lo + hi) * 0.5)
+}
+
 /// [`RangeFit`] of every reading of `obs` at AgentPose `pose` (excluded or not: the
 /// refinement compares hypotheses on the same readings).
 pub fn range_fit(

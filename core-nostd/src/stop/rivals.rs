@@ -24,10 +24,19 @@
 //! Rivals are fitted only when the answer explains more bearings than the pose has
 //! unknowns, and (under the calibrated stop) only when some margin could let the stop stop
 //! (`Pipeline::may_stop_on`): elsewhere the fits would cost the instrument time for nothing.
+//!
+//! The belief need not hold every rival. When all the readings fall on the four walls of
+//! one rectangle of the plan (the main room of an L, say), the answer turned by a half turn
+//! about that rectangle's centre predicts every range as well, though the plan as a whole
+//! has no such symmetry and the belief may show no mode there (a 180° flip answered at a
+//! stated 1 % on a building site). [`turned_image_rivals`] scores those turned images
+//! directly: with the heading unknown the stop does not answer while one of them lies in
+//! the room and scores within [`SWITCH_MARGIN`] of the answer.
 
 use crate::localization::{GhtLocalizer, Mode};
 use crate::registration::refine::{self, Budget, RefineInput, Refinement};
-use crate::registration::IcpParams;
+use crate::registration::{explained_hits_centre, range_fit, IcpParams, Observations, RangeModel};
+use crate::world::floorplan::FloorPlan;
 use crate::world::geometry::Pose2;
 use crate::world::math::{abs, cos, sin, wrap_angle};
 use core::f32::consts::TAU;
@@ -156,6 +165,41 @@ pub fn check(
     }
 }
 
+/// True when the answer at `pose` (log-likelihood `answer_ll` of the readings under `model`),
+/// turned by a quarter, half or three-quarter turn about the centre of the wall points its
+/// explained readings hit ([`explained_hits_centre`], readings within `gate`), lies in the
+/// room, is not the answer's own mode or a symmetric twin of it ([`same_mode`]), and
+/// explains the readings within [`SWITCH_MARGIN`] of the answer (module docs). Such an
+/// image is a rival the belief may not hold: the readings cannot tell the two apart.
+#[allow(clippy::too_many_arguments)]
+pub fn turned_image_rivals(
+    plan: &FloorPlan,
+    obs: &Observations,
+    pose: &Pose2,
+    answer_ll: f32,
+    model: &RangeModel,
+    icp: &IcpParams,
+    order: u8,
+    gate: f32,
+) -> bool {
+    let Some(centre) = explained_hits_centre(plan, obs, pose, gate) else {
+        return false;
+    };
+    let arm = pose.translation() - centre;
+    (1..4).any(|quarter| {
+        let g = quarter as f32 * core::f32::consts::FRAC_PI_2;
+        let (s, c) = (sin(g), cos(g));
+        let image = Pose2::new(
+            centre.x + c * arm.x - s * arm.y,
+            centre.y + s * arm.x + c * arm.y,
+            pose.theta + g,
+        );
+        !same_mode(&image, pose, icp, order)
+            && plan.contains(image.translation())
+            && range_fit(plan, obs, &image, model).log_likelihood >= answer_ll - SWITCH_MARGIN
+    })
+}
+
 /// The belief's strongest modes, the answer's among them (skipped by [`check`]).
 fn modes_of(loc: &GhtLocalizer) -> HVec<Mode, { MAX_RIVALS + 2 }> {
     loc.top_modes::<{ MAX_RIVALS + 2 }>(MODE_SEPARATION)
@@ -208,6 +252,63 @@ mod tests {
         // The right answer keeps its place, with no rival near it.
         let c = check(&input, &right, 1, &budget);
         assert!(!c.switched && c.answer == right && c.margin > 0.0, "{c:?}");
+    }
+
+    /// Plan 1000203's building-site flip, drawn small: an L whose main rectangle (12 × 14 m)
+    /// holds every reading. The answer turned by a half turn about that rectangle's centre
+    /// predicts each range exactly, though the L has no symmetry: a rival. One reading into
+    /// the L's other leg, which the turned image cannot explain, settles it.
+    #[test]
+    fn a_turned_image_that_explains_every_reading_is_a_rival() {
+        use crate::registration::Measurement;
+        use crate::world::geometry::{unit, v2, Vec2};
+        let plan = FloorPlan::new(&[
+            v2(0.0, 0.0),
+            v2(16.0, 0.0),
+            v2(16.0, 4.0),
+            v2(12.0, 4.0),
+            v2(12.0, 14.0),
+            v2(0.0, 14.0),
+        ])
+        .unwrap();
+        let truth = Pose2::new(4.0, 9.0, 0.3);
+        let hit = |b: f32| {
+            plan.ray_cast(truth.translation(), unit(truth.theta + b))
+                .unwrap()
+        };
+        // Bearings whose walls the half-turned image sees too: the main rectangle's, away
+        // from where its mirror image would fall into the other leg.
+        let on_main_walls =
+            |q: Vec2| q.x <= 12.001 && (q.x > 0.001 || q.y <= 10.0) && (q.x < 11.999 || q.y >= 4.0);
+        let mut obs = Observations::new();
+        for k in 0..16 {
+            let b = k as f32 * 0.39;
+            let h = hit(b);
+            if on_main_walls(h.point) {
+                obs.push(Measurement::new(b, h.range)).unwrap();
+            }
+        }
+        assert!(obs.len() >= 6, "{} readings on the main walls", obs.len());
+        let model = RangeModel::default();
+        let rivals = |obs: &Observations| {
+            let ll = range_fit(&plan, obs, &truth, &model).log_likelihood;
+            turned_image_rivals(&plan, obs, &truth, ll, &model, &icp(), 1, 0.09)
+        };
+        assert!(rivals(&obs), "the half-turned image explains every reading");
+        // Two readings give no centre to turn about.
+        let mut two = Observations::new();
+        for (b, r) in obs.readings().take(2) {
+            two.push(Measurement::new(b, r)).unwrap();
+        }
+        assert!(!rivals(&two));
+        // Bearing −1.0 looks through the leg's mouth (x = 12, y < 4) to its far end.
+        let leg = hit(-1.0);
+        assert!(leg.point.x > 12.5, "{leg:?}");
+        obs.push(Measurement::new(-1.0, leg.range)).unwrap();
+        assert!(
+            !rivals(&obs),
+            "a reading into the other leg tells them apart"
+        );
     }
 
     fn icp() -> IcpParams {
