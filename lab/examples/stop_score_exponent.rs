@@ -35,9 +35,15 @@ fn main() -> anyhow::Result<()> {
         let s: Sample = serde_json::from_value(v["sample"].clone())?;
         // Job order: an agent's plans ascend; a plan index below the last one starts the
         // next agent (or, with a new K, the first).
-        let agent = match last {
-            Some((lk, a, lp)) if lk == k && s.plan < lp => a + 1,
-            Some((lk, a, _)) if lk == k => a,
+        // Newer samples name their agent (and include the agent-table episodes); older ones
+        // are in job order.
+        let agent = match (v["agent"].as_str(), last) {
+            (Some(name), _) => AGENTS
+                .iter()
+                .position(|&a| a == name)
+                .unwrap_or(AGENTS.len()),
+            (None, Some((lk, a, lp))) if lk == k && s.plan < lp => a + 1,
+            (None, Some((lk, a, _))) if lk == k => a,
             _ => 0,
         };
         let list = episodes.entry((k, agent)).or_default();

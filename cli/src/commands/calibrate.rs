@@ -61,7 +61,8 @@ pub struct CalibrateArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Also write every decision point (features, label) as JSON lines to this file.
+    /// Also write every decision point (features, label, agent, K) as JSON lines to this file,
+    /// the agent-table episodes too (`lab/examples/threshold_by_level.rs` reads them).
     #[arg(long)]
     pub samples_out: Option<PathBuf>,
     /// Do not draw a progress bar.
