@@ -478,6 +478,30 @@ pub struct Fitted {
     pub held_out: HeldOut,
 }
 
+/// Appends the decision points of `episodes` (episode `i` played by `agent_of(i)`) to the
+/// JSON-lines file `path`, one `{"rot_bins", "agent", "sample"}` object a line.
+fn append_samples(
+    path: &std::path::Path,
+    rot_bins: u8,
+    episodes: &[EpisodeSamples],
+    agent_of: impl Fn(usize) -> AgentKind,
+) -> anyhow::Result<()> {
+    use std::io::Write;
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)?;
+    let mut f = std::io::BufWriter::new(file);
+    for (i, e) in episodes.iter().enumerate() {
+        let agent = agent_of(i).name();
+        for s in e {
+            let line = serde_json::json!({"rot_bins": rot_bins, "agent": agent, "sample": s});
+            writeln!(f, "{line}")?;
+        }
+    }
+    Ok(())
+}
+
 /// Runs one calibration (`command`: the command line, recorded in the generated source).
 pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
     let (agents, rot_bins, threshold_agents, table_agents) =
@@ -525,23 +549,7 @@ pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
         );
         let episodes = collect(&opts, k, agents, 0..a.plans, opts.progress);
         if let Some(path) = &a.samples_out {
-            use std::io::Write;
-            let mut f = std::io::BufWriter::new(
-                std::fs::OpenOptions::new()
-                    .create(true)
-                    .append(true)
-                    .open(path)?,
-            );
-            for (i, e) in episodes.iter().enumerate() {
-                let agent = agents[i / a.plans as usize].name();
-                for s in e {
-                    writeln!(
-                        f,
-                        "{}",
-                        serde_json::json!({"rot_bins": k, "agent": agent, "sample": s})
-                    )?;
-                }
-            }
+            append_samples(path, k, &episodes, |i| agents[i / a.plans as usize])?;
         }
         // Episodes come in job order: every plan of the first agent, then the next.
         let agent_of = |i: usize| agents[i / a.plans as usize];
@@ -590,16 +598,7 @@ pub fn calibrate(a: &CalibrateOptions, command: &str) -> anyhow::Result<()> {
                 opts.progress,
             );
             if let Some(path) = &a.samples_out {
-                use std::io::Write;
-                let mut f =
-                    std::io::BufWriter::new(std::fs::OpenOptions::new().append(true).open(path)?);
-                for s in extra.iter().flatten() {
-                    writeln!(
-                        f,
-                        "{}",
-                        serde_json::json!({"rot_bins": k, "agent": agent.name(), "sample": s})
-                    )?;
-                }
+                append_samples(path, k, &extra, |_| agent)?;
             }
             let first = agents.iter().position(|&x| x == agent).unwrap_or(0) * a.plans as usize;
             let (fit, check): (Vec<&EpisodeSamples>, Vec<&EpisodeSamples>) = episodes
