@@ -107,12 +107,12 @@ pub(super) fn compare_with_plan(
     ));
 }
 
-/// With the heading given, why the calibrated stop would not answer from this geometry, in
-/// words (the two rules of `Pipeline::features_with`): a direction that rests on one wall's
-/// readings alone, or a wall whose offset from its drawn line would carry into the answer
-/// by more than [`MAX_WALL_LEVERAGE`]. `None` when neither holds, with the heading unknown
-/// (the stop then does not apply them), or with too few readings to tell (the precision
-/// says so already).
+/// Why the calibrated stop would not answer from this geometry, in words (the two rules of
+/// `Pipeline::features_with`): a direction that rests on one wall's readings alone (with
+/// the heading known or not: the stop holds that rule either way), or, with the heading
+/// known, a wall whose offset from its drawn line would carry into the answer by more than
+/// [`MAX_WALL_LEVERAGE`]. `None` when neither holds, or with too few readings to tell (the
+/// precision says so already).
 ///
 /// **Why.** Such an answer can agree with every reading and still sit centimetres off:
 /// the room's walls are not exactly where the plan draws them (`docs/EVALUATION.md`, "The
@@ -124,10 +124,7 @@ pub(super) fn wall_reliance(
     pose: &Pose2,
     heading_known: bool,
 ) -> Option<String> {
-    if !heading_known {
-        return None;
-    }
-    let alone = WallInformation::of(plan, obs, pose, PRECISION_GATE).walls_alone(true);
+    let alone = WallInformation::of(plan, obs, pose, PRECISION_GATE).walls_alone(heading_known);
     if alone == usize::MAX {
         return None;
     }
@@ -135,6 +132,9 @@ pub(super) fn wall_reliance(
         return Some(
             "one direction of the answer rests on the readings of a single wall: were that wall a few cm off its drawn line, the answer would be off by as much, and no reading would show it; take a reading on another wall along that direction".to_string(),
         );
+    }
+    if !heading_known {
+        return None;
     }
     let lever = WallLeverage::of(plan, obs, pose, PRECISION_GATE);
     let worst = lever.worst(true);
@@ -318,10 +318,10 @@ mod tests {
         let text = one.to_text();
         assert!(text.contains("RESTS ON ONE WALL"), "{text}");
         assert!(text.contains("the stop does not answer while"), "{text}");
-        assert_eq!(
-            answer(&rect, &[0.0, 0.2, FRAC_PI_2, -FRAC_PI_2], false).wall_reliance,
-            None
-        );
+        // The stop holds that rule with the heading unknown too.
+        let unknown = answer(&rect, &[0.0, 0.2, 0.4, FRAC_PI_2, -FRAC_PI_2], false);
+        let words = unknown.wall_reliance.as_deref().unwrap_or_default();
+        assert!(words.contains("a single wall"), "{words}");
         // A room narrowing to the east: the slanting walls share their east corners with
         // the east wall (wall 2), so readings near those corners move with its offset.
         let narrowing =
