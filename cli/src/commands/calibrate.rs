@@ -114,10 +114,19 @@ pub fn cmd_calibrate(a: CalibrateArgs) -> anyhow::Result<()> {
         );
     }
     let instrument = a.episode.instrument.instrument;
-    let command = std::iter::once("activesense".to_string())
-        .chain(std::env::args().skip(1))
-        .collect::<Vec<_>>()
-        .join(" ");
+    // The command recorded in the generated source, less `--samples-out FILE`: it writes
+    // the decision points beside the fit and changes nothing in it, so a calibration run
+    // for its samples writes the same source as `cargo xtask reproduce`.
+    let mut args = std::env::args().skip(1);
+    let mut recorded = vec!["activesense".to_string()];
+    while let Some(arg) = args.next() {
+        if arg == "--samples-out" {
+            args.next();
+        } else if !arg.starts_with("--samples-out=") {
+            recorded.push(arg);
+        }
+    }
+    let command = recorded.join(" ");
     let opts = CalibrateOptions {
         agents,
         rot_bins,

@@ -285,9 +285,10 @@ impl WallLeverage {
         }
     }
 
-    /// The position shift `(dx, dy)` (m) of the least-squares answer per metre of `wall`'s
-    /// offset; `None` when the readings leave a direction free (or are too few).
-    pub fn shift(&self, wall: usize, fixed_heading: bool) -> Option<(f64, f64)> {
+    /// The shift `(dx, dy, dθ)` (m, m, rad) of the least-squares answer per metre of
+    /// `wall`'s offset (`dθ = 0` with the heading fixed); `None` when the readings leave a
+    /// direction free (or are too few).
+    pub fn shift(&self, wall: usize, fixed_heading: bool) -> Option<(f64, f64, f64)> {
         let acc = self.per_wall.get(wall)?;
         let unknowns = if fixed_heading { 2 } else { 3 };
         if self.used <= unknowns {
@@ -303,13 +304,13 @@ impl WallLeverage {
             return Some((
                 (m[1][1] * g[0] - m[0][1] * g[1]) / det,
                 (m[0][0] * g[1] - m[1][0] * g[0]) / det,
+                0.0,
             ));
         }
         let det = det3(m);
         if det.is_nan() || det <= SINGULAR_RATIO * m[0][0] * m[1][1] * m[2][2] {
             return None;
         }
-        // Cramer's rule for the two position unknowns.
         let solve = |col: usize| {
             let mut mm = *m;
             for (row, gr) in mm.iter_mut().zip(g) {
@@ -317,21 +318,30 @@ impl WallLeverage {
             }
             det3(&mm) / det
         };
-        Some((solve(0), solve(1)))
+        Some((solve(0), solve(1), solve(2)))
+    }
+
+    /// The largest heading shift over the walls read (rad per metre of one wall's offset).
+    pub fn worst_heading(&self) -> f32 {
+        self.worst_by(false, |_, _, dt| abs(dt as f32))
     }
 
     /// The largest position shift over the walls read (m per metre of one wall's offset);
     /// infinite when the readings leave a direction free.
     pub fn worst(&self, fixed_heading: bool) -> f32 {
+        self.worst_by(fixed_heading, |dx, dy, _| sqrt((dx * dx + dy * dy) as f32))
+    }
+
+    fn worst_by(&self, fixed_heading: bool, size: impl Fn(f64, f64, f64) -> f32) -> f32 {
         let mut worst = 0.0f32;
         for (wall, acc) in self.per_wall.iter().enumerate() {
             if acc.iter().all(|&x| x == 0.0) {
                 continue;
             }
-            let Some((dx, dy)) = self.shift(wall, fixed_heading) else {
+            let Some((dx, dy, dt)) = self.shift(wall, fixed_heading) else {
                 return f32::INFINITY;
             };
-            let l = sqrt((dx * dx + dy * dy) as f32);
+            let l = size(dx, dy, dt);
             if l.is_nan() {
                 return f32::INFINITY;
             }
@@ -773,7 +783,7 @@ mod tests {
                     let tail: f64 = (c + 1..k).map(|q| a[c][q] * x[q]).sum();
                     x[c] = (a[c][3] - tail) / a[c][c];
                 }
-                let (dx, dy) = lever.shift(wall, fixed).unwrap();
+                let (dx, dy, _) = lever.shift(wall, fixed).unwrap();
                 let err = ((dx - x[0]).powi(2) + (dy - x[1]).powi(2)).sqrt();
                 assert!(err < 0.02, "wall {wall} fixed {fixed}: {dx} {dy} vs {x:?}");
             }

@@ -41,7 +41,7 @@ pub const MODELS: &[StopModel] = &[
             }),
             Some(AgentTable {
                 agent: AgentKind::Heuristic1,
-                thresholds: [0.00013106849, 0.015089049, 0.3036756, 0.28679833, 0.9],
+                thresholds: [0.00013106849, 0.015089049, 0.28679833, 0.28679833, 0.9],
             }),
         ],
     },
@@ -74,9 +74,9 @@ pub const MODELS: &[StopModel] = &[
             Some(AgentTable {
                 agent: AgentKind::Learnt,
                 thresholds: [
-                    0.000502436,
                     0.00033670355,
-                    0.0078177,
+                    0.00033670355,
+                    0.0071751173,
                     0.0071751173,
                     0.4798177,
                 ],

@@ -80,6 +80,61 @@ pub const MARGIN_KNEE: f32 = 10.0;
 /// known, as aiming.
 pub const MAX_WALL_LEVERAGE: f32 = 0.9;
 
+/// Largest wall leverage with the heading unknown (the position's, heading free) at which
+/// the stop answers on the EDM-only profile ([`LeverageVeto`]): a wall as far off its line
+/// as the surveyor's tolerance moves the answer at most as far.
+pub const VETO_WALL_LEVERAGE: f32 = 1.0;
+
+/// Largest heading leverage (rad per metre of one wall's as-built offset,
+/// [`crate::registration::precision::WallLeverage::worst_heading`]) at which the stop
+/// answers with the heading unknown on the EDM-only profile ([`LeverageVeto`]): a wall
+/// 5 cm off its line turns the answer at most 0.57°.
+///
+/// **Why these bounds.** On 1000 validation plans per site level (learnt, K = 10, stated
+/// 1 %), the veto took wrong answers from 7 to 1 on plans, 4 to 1 in furnished rooms and 11
+/// to 8 on building sites, for 0.1, 0.9 and 1.2 points of right answers. The tighter 0.9 /
+/// 0.15 held sites to 5 wrong but cost plans 1.9 points (`docs/lab/stop.md`, "The wall
+/// leverage as a veto after the estimate").
+pub const VETO_WALL_HEADING_LEVERAGE: f32 = 0.2;
+
+/// How far the worst wall's drawn position carries into an answer with the heading
+/// unknown ([`crate::registration::precision::WallLeverage`] with three unknowns): the
+/// stop's veto on the EDM-only profile, read after its estimate.
+///
+/// **Why a veto, not a rule before the estimate.** On building sites (one wall 3–6 cm off
+/// its line) most wrong K = 10 answers explained every reading: the fit followed the moved
+/// wall, and nothing the estimate reads can see it (`docs/lab/stop.md`, "The wall leverage
+/// with the heading unknown"). As a rule before the estimate, the decision points it
+/// refused left the calibration's fit (19,232 of 26,572 kept), the refitted model lost
+/// what it knew about flips, and its 1 % threshold loosened tenfold. As a veto the model
+/// is fitted, and the tables placed, on every decision point as without it: the veto only
+/// takes answers away (`activesense_lab::calibrate::score` says why the tables are not
+/// placed on what it lets through).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LeverageVeto {
+    /// Worst position shift per metre of one wall's offset (infinite where the readings
+    /// leave a direction free).
+    pub position: f32,
+    /// Worst heading shift (rad) per metre of one wall's offset.
+    pub heading: f32,
+}
+
+impl LeverageVeto {
+    /// The worst walls' leverages of `lever`, the heading free.
+    pub fn of(lever: &crate::registration::precision::WallLeverage) -> Self {
+        Self {
+            position: lever.worst(false),
+            heading: lever.worst_heading(),
+        }
+    }
+
+    /// The stop does not answer: one wall's offset would carry past [`VETO_WALL_LEVERAGE`]
+    /// or [`VETO_WALL_HEADING_LEVERAGE`] into the answer (NaN counts as past).
+    pub fn vetoes(&self) -> bool {
+        !(self.position <= VETO_WALL_LEVERAGE && self.heading <= VETO_WALL_HEADING_LEVERAGE)
+    }
+}
+
 /// Share of the distinct bearings that, left unexplained by the answer (with at least
 /// [`MISMATCH_MIN_READINGS`] of them), means the room does not match its plan: the answer
 /// says so in words (`instrument::answer`), and with the heading unknown the stop does not
@@ -129,6 +184,17 @@ pub fn stop_score(risk: f32, bearings: u16) -> f32 {
     risk * SCORE_REFERENCE_READINGS / f32::from(bearings.max(1))
 }
 
+/// What the stop compares with its threshold table at the decision point `f` whose
+/// estimate is `risk`: its [`stop_score`], infinite where the veto holds
+/// ([`StopFeatures::vetoed`]), so that no threshold answers there.
+pub fn decision_score(f: &StopFeatures, risk: f32) -> f32 {
+    if f.vetoed() {
+        f32::INFINITY
+    } else {
+        stop_score(risk, f.readings)
+    }
+}
+
 /// What the stop estimate looks at, after a measurement.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StopFeatures {
@@ -173,6 +239,10 @@ pub struct StopFeatures {
     /// when they leave a direction free.
     #[serde(default)]
     pub precision: Option<AnswerPrecision>,
+    /// The wall leverage the stop vetoes by ([`LeverageVeto`]); `None` where it does not
+    /// (the heading known, or the paper's sensor). Not an input of the estimate.
+    #[serde(default)]
+    pub leverage: Option<LeverageVeto>,
 }
 
 /// Standard deviations of the answer from the information of the readings it explains
@@ -210,6 +280,12 @@ fn unit_variance_factor() -> f32 {
 }
 
 impl StopFeatures {
+    /// The stop's veto holds here ([`LeverageVeto::vetoes`]): no answer, whatever the
+    /// estimate.
+    pub fn vetoed(&self) -> bool {
+        self.leverage.is_some_and(|l| l.vetoes())
+    }
+
     /// The model's input vector: logit of the peak mass, entropy, ln(readings), readings
     /// left unexplained, explained readings beyond the unknowns (capped at 10: the checks
     /// the fit passed), observability, the refined pose's offsets from the argmax (cells,
@@ -395,6 +471,12 @@ impl StopModel {
         stop_score(risk, bearings) < self.threshold_for(agent, p)
     }
 
+    /// [`Self::stops`] at the decision point `f` whose estimate is `risk`, with its veto
+    /// ([`decision_score`]).
+    pub fn stops_on(&self, agent: AgentKind, f: &StopFeatures, risk: f32, p: f32) -> bool {
+        decision_score(f, risk) < self.threshold_for(agent, p)
+    }
+
     /// The estimated probability that the answered pose's cell is wrong.
     pub fn risk(&self, f: &StopFeatures) -> f32 {
         let x = f.to_vector();
@@ -500,7 +582,45 @@ mod tests {
             agrees: true,
             rival_margin: 12.0,
             precision: None,
+            leverage: None,
         }
+    }
+
+    /// The committed tables, both profiles, every K and agent: a smaller stated risk never
+    /// has a larger threshold (a user asking for less risk never gets a looser stop, and
+    /// [`StopModel::calibrated_risk`] bisects them).
+    #[test]
+    fn the_committed_threshold_tables_are_monotone() {
+        let models = calibration::MODELS.iter().chain(calibration_edm::MODELS);
+        for m in models {
+            let tables = core::iter::once(m.thresholds)
+                .chain(m.agent_tables.iter().flatten().map(|t| t.thresholds));
+            for t in tables {
+                assert!(
+                    t.windows(2).all(|w| w[0] <= w[1]),
+                    "K = {}: {t:?}",
+                    m.rot_bins
+                );
+            }
+        }
+    }
+
+    /// The veto holds past either bound, and on NaN; the decision score is then infinite.
+    #[test]
+    fn the_leverage_veto_holds_past_either_bound() {
+        let at = |position, heading| LeverageVeto { position, heading };
+        assert!(!at(VETO_WALL_LEVERAGE, VETO_WALL_HEADING_LEVERAGE).vetoes());
+        assert!(at(VETO_WALL_LEVERAGE * 1.01, 0.0).vetoes());
+        assert!(at(0.0, VETO_WALL_HEADING_LEVERAGE * 1.01).vetoes());
+        assert!(at(f32::NAN, 0.0).vetoes());
+        assert!(at(f32::INFINITY, 0.0).vetoes());
+        let mut f = features(0.99, 8, 8);
+        assert_eq!(decision_score(&f, 0.001), stop_score(0.001, 8));
+        f.leverage = Some(at(2.0, 0.0));
+        assert!(f.vetoed());
+        assert_eq!(decision_score(&f, 0.001), f32::INFINITY);
+        let m = StopModel::built_in(InstrumentProfile::Edm, 10);
+        assert!(!m.stops_on(AgentKind::Learnt, &f, 0.0, 0.1));
     }
 
     #[test]

@@ -7,7 +7,9 @@ use super::{Answer, Reading, ReadingFit, MISMATCH_MIN_READINGS, MISMATCH_SHARE, 
 use crate::world::planfile::PlanFrame;
 use activesense_core::registration::precision::{WallInformation, WallLeverage};
 use activesense_core::registration::{Measurement, Observations};
-use activesense_core::stop::MAX_WALL_LEVERAGE;
+use activesense_core::stop::{
+    LeverageVeto, MAX_WALL_LEVERAGE, VETO_WALL_HEADING_LEVERAGE, VETO_WALL_LEVERAGE,
+};
 use activesense_core::{FloorPlan, Pose2};
 
 /// Compares every reading with the range the plan predicts from `pose` ([`ReadingFit`]) and,
@@ -108,11 +110,12 @@ pub(super) fn compare_with_plan(
 }
 
 /// Why the calibrated stop would not answer from this geometry, in words (the two rules of
-/// `Pipeline::features_with`): a direction that rests on one wall's readings alone (with
-/// the heading known or not: the stop holds that rule either way), or, with the heading
-/// known, a wall whose offset from its drawn line would carry into the answer by more than
-/// [`MAX_WALL_LEVERAGE`]. `None` when neither holds, or with too few readings to tell (the
-/// precision says so already).
+/// `Pipeline::features_with` and its veto): a direction that rests on one wall's readings
+/// alone (with the heading known or not: the stop holds that rule either way); with the
+/// heading known, a wall whose offset from its drawn line would carry into the answer by
+/// more than [`MAX_WALL_LEVERAGE`]; with it unknown and `leverage_veto` (the EDM-only
+/// profile), the same with the heading free ([`LeverageVeto`]). `None` when none holds, or
+/// with too few readings to tell (the precision says so already).
 ///
 /// **Why.** Such an answer can agree with every reading and still sit centimetres off:
 /// the room's walls are not exactly where the plan draws them (`docs/EVALUATION.md`, "The
@@ -123,6 +126,7 @@ pub(super) fn wall_reliance(
     obs: &Observations,
     pose: &Pose2,
     heading_known: bool,
+    leverage_veto: bool,
 ) -> Option<String> {
     let alone = WallInformation::of(plan, obs, pose, PRECISION_GATE).walls_alone(heading_known);
     if alone == usize::MAX {
@@ -134,7 +138,9 @@ pub(super) fn wall_reliance(
         );
     }
     if !heading_known {
-        return None;
+        return leverage_veto
+            .then(|| vetoed_leverage(plan, obs, pose))
+            .flatten();
     }
     let lever = WallLeverage::of(plan, obs, pose, PRECISION_GATE);
     let worst = lever.worst(true);
@@ -142,7 +148,7 @@ pub(super) fn wall_reliance(
         return None;
     }
     let (wall, shift) = (0..plan.len())
-        .filter_map(|w| lever.shift(w, true).map(|(dx, dy)| (w, dx.hypot(dy))))
+        .filter_map(|w| lever.shift(w, true).map(|(dx, dy, _)| (w, dx.hypot(dy))))
         .fold((0, 0.0f64), |b, c| if c.1 > b.1 { c } else { b });
     Some(format!(
         "the answer rests on wall {}'s drawn position: it moves {shift:.2} cm for every cm that wall stands off its line (the stop answers only below {MAX_WALL_LEVERAGE:.2}), and its neighbours' readings near the shared corners move with it; take a reading on a wall facing it",
@@ -150,10 +156,38 @@ pub(super) fn wall_reliance(
     ))
 }
 
+/// With the heading unknown on the EDM-only profile, the stop's veto
+/// ([`LeverageVeto`]) in words: which wall's offset would carry into the answer, by how
+/// much, and the reading that would settle it; `None` when it does not hold.
+fn vetoed_leverage(plan: &FloorPlan, obs: &Observations, pose: &Pose2) -> Option<String> {
+    let lever = WallLeverage::of(plan, obs, pose, PRECISION_GATE);
+    if !LeverageVeto::of(&lever).vetoes() {
+        return None;
+    }
+    // The wall whose offset carries furthest, by the bound it breaks most.
+    let (wall, dx, dy, dt) = (0..plan.len())
+        .filter_map(|w| lever.shift(w, false).map(|(dx, dy, dt)| (w, dx, dy, dt)))
+        .max_by(|a, b| {
+            let size = |&(_, dx, dy, dt): &(usize, f64, f64, f64)| {
+                (dx.hypot(dy) / f64::from(VETO_WALL_LEVERAGE))
+                    .max(dt.abs() / f64::from(VETO_WALL_HEADING_LEVERAGE))
+            };
+            size(a).total_cmp(&size(b))
+        })?;
+    Some(format!(
+        "the answer leans on wall {}'s drawn position: for every cm that wall stands off its line it moves {:.2} cm and turns {:.3}° (the stop answers only below {VETO_WALL_LEVERAGE:.2} cm and {:.3}°), and no reading would show it; take a reading on a wall facing it",
+        wall + 1,
+        dx.hypot(dy),
+        (dt.abs() * 0.01).to_degrees(),
+        (f64::from(VETO_WALL_HEADING_LEVERAGE) * 0.01).to_degrees(),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::{AnswerInput, ReadingFit};
     use super::*;
+    use activesense_core::episode::{AgentKind, InstrumentProfile};
     use activesense_core::world::geometry::{rotate, unit, v2};
     use std::f32::consts::{FRAC_PI_2, PI};
 
@@ -338,5 +372,61 @@ mod tests {
             answer(&narrowing, &[0.0, -1.0, 1.0, -0.8, PI], true).wall_reliance,
             None
         );
+    }
+
+    /// With the heading unknown on the EDM-only profile, an answer whose heading one
+    /// wall's offset would turn past the stop's bound says so in words, names the wall and
+    /// states no risk; with the paper's sensor or no stop tables it does not, and readings
+    /// all round the room clear it.
+    #[test]
+    fn an_answer_past_the_leverage_veto_says_which_wall_on_the_edm_profile() {
+        let rect =
+            FloorPlan::new(&[v2(-6.0, -4.0), v2(6.0, -4.0), v2(6.0, 4.0), v2(-6.0, 4.0)]).unwrap();
+        let answer = |bearings: &[f32], instrument: Option<InstrumentProfile>| {
+            let pose = Pose2::new(3.0, 0.3, 0.0);
+            let readings: Vec<Measurement> = bearings
+                .iter()
+                .map(|&b| {
+                    let hit = rect.ray_cast(pose.translation(), unit(b)).unwrap();
+                    Measurement::new(b, hit.range)
+                })
+                .collect();
+            let frame = PlanFrame::default();
+            Answer::new(&AnswerInput {
+                label: "walls".into(),
+                plan: &rect,
+                frame: &frame,
+                pose: Some(pose),
+                refined: true,
+                readings: &readings,
+                heading_known: false,
+                symmetry_order: 1,
+                stop_risk: Some(0.001),
+                stop_tables: instrument.map(|i| (AgentKind::Learnt, i, 10)),
+                truth: None,
+                hint: None,
+                range_sigma: 0.01,
+            })
+        };
+        // Two readings on the east wall fix the heading: its offset turns the answer.
+        let turned = [0.0, 0.3, 1.5, -1.5, PI];
+        let edm = answer(&turned, Some(InstrumentProfile::Edm));
+        let words = edm.wall_reliance.as_deref().unwrap_or_default();
+        assert!(
+            words.contains("leans on wall 2's drawn position"),
+            "{words}"
+        );
+        assert!(words.contains("turns"), "{words}");
+        assert_eq!(edm.risk, None);
+        assert!(edm.to_text().contains("RESTS ON ONE WALL"));
+        let scan = answer(&turned, Some(InstrumentProfile::EdmScan));
+        assert_eq!(scan.wall_reliance, None);
+        assert!(scan.risk.is_some());
+        assert_eq!(answer(&turned, None).wall_reliance, None);
+        // Readings all round the room: no wall carries far.
+        let round = [0.0, 1.5, -1.5, PI, 2.5, -2.5];
+        let edm = answer(&round, Some(InstrumentProfile::Edm));
+        assert_eq!(edm.wall_reliance, None);
+        assert!(edm.risk.is_some());
     }
 }

@@ -258,10 +258,11 @@ pub struct Answer {
     /// readings hit something not on the plan, near which walls).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mismatch: Option<String>,
-    /// With the heading given, when the answer rests on one wall's drawn position (a
-    /// direction fixed by one wall alone, or a wall whose offset would carry into it), that,
-    /// in words, with the reading that would settle it: the calibrated stop does not answer
-    /// such a geometry.
+    /// When the answer rests on one wall's drawn position (a direction fixed by one wall
+    /// alone; or a wall whose offset would carry into it, with the heading given, or with
+    /// it unknown on the EDM-only profile), that, in words, with the reading that would
+    /// settle it: the calibrated stop does not answer such a geometry, and [`Self::risk`]
+    /// is then `None`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wall_reliance: Option<String>,
 }
@@ -377,9 +378,18 @@ impl Answer {
         // Precision from the information matrix of the readings the pose explains.
         let obs = Observations::from_slice(i.readings).ok();
         if i.refined {
+            // The stop's leverage veto holds on the EDM-only profile with the heading
+            // unknown (`Pipeline::leverage_veto`).
+            let veto = !i.heading_known
+                && i.stop_tables
+                    .is_some_and(|(_, instrument, _)| instrument == InstrumentProfile::Edm);
             a.wall_reliance = obs
                 .as_ref()
-                .and_then(|o| fit::wall_reliance(i.plan, o, &pose, i.heading_known));
+                .and_then(|o| fit::wall_reliance(i.plan, o, &pose, i.heading_known, veto));
+            // The stop answers such a geometry at no stated risk.
+            if a.wall_reliance.is_some() {
+                a.risk = None;
+            }
         }
         let cov = obs.as_ref().map(|o| {
             pose_covariance(
