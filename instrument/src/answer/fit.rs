@@ -311,6 +311,40 @@ mod tests {
         assert!(b.mismatch.is_some());
     }
 
+    /// The answer at (3, 0.3, 0) from exact readings of `plan` at `bearings`.
+    fn answer_from(
+        plan: &FloorPlan,
+        bearings: &[f32],
+        heading_known: bool,
+        stop_risk: Option<f32>,
+        stop_tables: Option<(AgentKind, InstrumentProfile, u8)>,
+    ) -> Answer {
+        let pose = Pose2::new(3.0, 0.3, 0.0);
+        let readings: Vec<Measurement> = bearings
+            .iter()
+            .map(|&b| {
+                let hit = plan.ray_cast(pose.translation(), unit(b)).unwrap();
+                Measurement::new(b, hit.range)
+            })
+            .collect();
+        let frame = PlanFrame::default();
+        Answer::new(&AnswerInput {
+            label: "walls".into(),
+            plan,
+            frame: &frame,
+            pose: Some(pose),
+            refined: true,
+            readings: &readings,
+            heading_known,
+            symmetry_order: 1,
+            stop_risk,
+            stop_tables,
+            truth: None,
+            hint: None,
+            range_sigma: 0.01,
+        })
+    }
+
     /// With the heading given, an answer whose geometry the stop does not answer says so in
     /// words: a direction fixed by one wall alone; a wall whose offset carries into the
     /// answer (the readings on it and on its neighbours near the shared corners); and once
@@ -318,30 +352,7 @@ mod tests {
     #[test]
     fn an_answer_that_rests_on_one_wall_says_which_and_what_would_settle_it() {
         let answer = |plan: &FloorPlan, bearings: &[f32], heading_known: bool| {
-            let pose = Pose2::new(3.0, 0.3, 0.0);
-            let readings: Vec<Measurement> = bearings
-                .iter()
-                .map(|&b| {
-                    let hit = plan.ray_cast(pose.translation(), unit(b)).unwrap();
-                    Measurement::new(b, hit.range)
-                })
-                .collect();
-            let frame = PlanFrame::default();
-            Answer::new(&AnswerInput {
-                label: "walls".into(),
-                plan,
-                frame: &frame,
-                pose: Some(pose),
-                refined: true,
-                readings: &readings,
-                heading_known,
-                symmetry_order: 1,
-                stop_risk: None,
-                stop_tables: None,
-                truth: None,
-                hint: None,
-                range_sigma: 0.01,
-            })
+            answer_from(plan, bearings, heading_known, None, None)
         };
         // x by the east wall alone (two readings), y by the north and south walls.
         let rect =
@@ -383,30 +394,8 @@ mod tests {
         let rect =
             FloorPlan::new(&[v2(-6.0, -4.0), v2(6.0, -4.0), v2(6.0, 4.0), v2(-6.0, 4.0)]).unwrap();
         let answer = |bearings: &[f32], instrument: Option<InstrumentProfile>| {
-            let pose = Pose2::new(3.0, 0.3, 0.0);
-            let readings: Vec<Measurement> = bearings
-                .iter()
-                .map(|&b| {
-                    let hit = rect.ray_cast(pose.translation(), unit(b)).unwrap();
-                    Measurement::new(b, hit.range)
-                })
-                .collect();
-            let frame = PlanFrame::default();
-            Answer::new(&AnswerInput {
-                label: "walls".into(),
-                plan: &rect,
-                frame: &frame,
-                pose: Some(pose),
-                refined: true,
-                readings: &readings,
-                heading_known: false,
-                symmetry_order: 1,
-                stop_risk: Some(0.001),
-                stop_tables: instrument.map(|i| (AgentKind::Learnt, i, 10)),
-                truth: None,
-                hint: None,
-                range_sigma: 0.01,
-            })
+            let tables = instrument.map(|i| (AgentKind::Learnt, i, 10));
+            answer_from(&rect, bearings, false, Some(0.001), tables)
         };
         // Two readings on the east wall fix the heading: its offset turns the answer.
         let turned = [0.0, 0.3, 1.5, -1.5, PI];
