@@ -410,6 +410,43 @@ mod tests {
         assert!(t.summary.measurements > 7, "{}", t.summary.measurements);
     }
 
+    /// With the heading unknown the runner aims only where the stop's estimate would answer
+    /// and the wall-leverage veto holds it back (`Pipeline::aim`), and there it does aim:
+    /// the learnt EDM-only policy at K = 10 on building sites (`--site site`) of validation
+    /// plans, calibrated stop at the default risk.
+    #[test]
+    fn with_the_heading_unknown_the_runner_aims_only_where_the_veto_holds_an_answer() {
+        let instrument = InstrumentProfile::Edm;
+        let policies = Policies::load_for(instrument, &[], &[10]).unwrap();
+        let (mut aimed, mut answered_after_aiming) = (0, 0);
+        for seed in 1_001_000..1_001_040 {
+            let mut spec = episode::EpisodeSpec::new(seed, AgentKind::Learnt);
+            spec.rot_bins = 10;
+            spec.config.instrument = instrument;
+            spec.termination = episode::Termination::Confident;
+            spec.sensor.site = crate::world::site::SiteLevel::Site;
+            let mut aims = 0;
+            let (t, _) = run_agent_episode_observed(&spec, &policies, &mut |v| {
+                if v.runner.aim_target().is_some() {
+                    assert!(
+                        v.runner.pipeline().held_by_veto(),
+                        "plan {seed}: aimed unheld"
+                    );
+                    aims += 1;
+                }
+            })
+            .unwrap();
+            aimed += usize::from(aims > 0);
+            answered_after_aiming +=
+                usize::from(aims > 0 && t.end == episode::EndReason::Confident);
+        }
+        assert!(aimed >= 2, "{aimed} episodes aimed");
+        assert!(
+            answered_after_aiming >= 1,
+            "{answered_after_aiming} answered after aiming"
+        );
+    }
+
     /// The EDM-only int8 policy's episode on plan `seed`'s building site (`--site site`),
     /// calibrated stop at the default risk.
     fn int8_episode_on_a_building_site(seed: u32, rot_bins: u8) -> episode::Trajectory {

@@ -157,6 +157,10 @@ pub struct Pipeline {
     alternate_refinements: [Option<Refinement>; refine::ALTERNATE_MODES],
     /// The confident rule's lowest-risk moment so far ([`Pipeline::finish`]).
     best_answer: Option<Answer>,
+    /// The state ([`Pipeline::refinement_key`]) at which the calibrated stop's estimate
+    /// could have answered but the leverage veto held ([`crate::stop::LeverageVeto`]):
+    /// there the runner aims at the reading that lowers the leverage ([`Pipeline::aim`]).
+    held_by_veto: Option<(usize, u32)>,
 }
 
 /// One moment of a confident episode, kept as its answer should the episode never become
@@ -201,6 +205,7 @@ impl Pipeline {
             belief_summary: None,
             alternate_refinements: [None; refine::ALTERNATE_MODES],
             best_answer: None,
+            held_by_veto: None,
         }
     }
 
@@ -238,6 +243,7 @@ impl Pipeline {
         self.belief_summary = None;
         self.alternate_refinements = [None; refine::ALTERNATE_MODES];
         self.best_answer = None;
+        self.held_by_veto = None;
         self.params = *params;
         self.voted = false;
         self.ready = true;
@@ -341,6 +347,13 @@ impl Pipeline {
     /// Cyclic symmetry order of the plan.
     pub fn symmetry_order(&self) -> u8 {
         self.order
+    }
+
+    /// Whether the current state is one where the calibrated stop's estimate could have
+    /// answered and only the wall-leverage veto held it back (what the runner aims at with
+    /// the heading unknown, [`Pipeline::aim`]).
+    pub fn held_by_veto(&self) -> bool {
+        self.held_by_veto == Some(self.refinement_key())
     }
 
     /// True once a vote has landed.

@@ -143,6 +143,12 @@ impl EpisodeRunner {
         )
     }
 
+    /// The encoder bearing the runner is turning to and will measure at ([`Pipeline::aim`]),
+    /// if it aims.
+    pub fn aim_target(&self) -> Option<u16> {
+        self.aim
+    }
+
     /// Rotations in a row after which [`Self::decide`] measures: one whole turn.
     pub fn stall_limit(&self) -> u16 {
         self.state.config.steps_per_turn

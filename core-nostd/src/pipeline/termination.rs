@@ -32,6 +32,12 @@ impl Pipeline {
                 let model =
                     StopModel::built_in(self.params.config.instrument, self.params.rot_bins);
                 let (agent, p) = (self.params.agent, self.params.config.stop_risk);
+                // Where only the veto holds the answer back (for some rival margin: the
+                // rivals of a vetoed point are not searched), the runner aims at the
+                // reading that lowers the leverage ([`Pipeline::aim`]).
+                self.held_by_veto = estimate
+                    .filter(|(_, f)| f.vetoed() && self.may_stop_with(f))
+                    .map(|_| self.refinement_key());
                 estimate
                     .filter(|(risk, f)| model.stops_on(agent, f, *risk, p))
                     .map(|_| Stop::Confident)?
@@ -114,20 +120,23 @@ impl Pipeline {
         let Some(peak_mass) = self.stop_gate() else {
             return false;
         };
-        let model = StopModel::built_in(self.params.config.instrument, self.params.rot_bins);
         // The features but the margin once: the belief's entropy and the readings'
         // observability are whole passes, the same for every margin.
         let Some(f) = self.features_with(peak_mass, refined, 0.0) else {
             return false;
         };
-        if f.vetoed() {
-            return false;
-        }
+        !f.vetoed() && self.may_stop_with(&f)
+    }
+
+    /// Whether the calibrated stop's estimate is below the threshold at `f` for some rival
+    /// margin, the veto aside ([`Pipeline::may_stop_on`]).
+    fn may_stop_with(&self, f: &StopFeatures) -> bool {
+        let model = StopModel::built_in(self.params.config.instrument, self.params.rot_bins);
         [-rivals::MARGIN_CAP, stop::MARGIN_KNEE, rivals::MARGIN_CAP]
             .iter()
             .map(|&m| StopFeatures {
                 rival_margin: m,
-                ..f
+                ..*f
             })
             .any(|f| {
                 let p = self.params.config.stop_risk;

@@ -91,10 +91,12 @@ pub const VETO_WALL_LEVERAGE: f32 = 1.0;
 /// 5 cm off its line turns the answer at most 0.57°.
 ///
 /// **Why these bounds.** On 1000 validation plans per site level (learnt, K = 10, stated
-/// 1 %), the veto took wrong answers from 7 to 1 on plans, 4 to 1 in furnished rooms and 11
-/// to 8 on building sites, for 0.1, 0.9 and 1.2 points of right answers. The tighter 0.9 /
-/// 0.15 held sites to 5 wrong but cost plans 1.9 points (`docs/lab/stop.md`, "The wall
-/// leverage as a veto after the estimate").
+/// 1 %), the veto at 1.0 / 0.2 took wrong answers from 7 to 1 on plans, 4 to 1 in furnished
+/// rooms and 11 to 8 on building sites (1.5 % of answers), for 0.1, 0.9 and 1.2 points of
+/// right answers. With the runner aiming where only the veto holds an answer back
+/// ([`crate::pipeline::Pipeline::aim`]), 0.85 / 0.2 held validation sites to 4 wrong of 463
+/// (0.86 %) for 1.4 points of the plans' right answers, but the test plans to 5 of 457
+/// (1.1 %) for 2.2 (`docs/lab/stop.md`, "Aiming where the veto holds an answer back").
 pub const VETO_WALL_HEADING_LEVERAGE: f32 = 0.2;
 
 /// How far the worst wall's drawn position carries into an answer with the heading
@@ -132,6 +134,16 @@ impl LeverageVeto {
     /// or [`VETO_WALL_HEADING_LEVERAGE`] into the answer (NaN counts as past).
     pub fn vetoes(&self) -> bool {
         !(self.position <= VETO_WALL_LEVERAGE && self.heading <= VETO_WALL_HEADING_LEVERAGE)
+    }
+
+    /// How far past the veto's bounds the worse of the two leverages stands, as a share of
+    /// its bound (above 1 where [`Self::vetoes`]; NaN counts as infinite): what the runner
+    /// lowers when it aims ([`crate::pipeline::Pipeline::aim`]).
+    pub fn excess(&self) -> f32 {
+        if self.position.is_nan() || self.heading.is_nan() {
+            return f32::INFINITY;
+        }
+        (self.position / VETO_WALL_LEVERAGE).max(self.heading / VETO_WALL_HEADING_LEVERAGE)
     }
 }
 
