@@ -63,21 +63,14 @@ fn main() -> anyhow::Result<()> {
                 |half| threshold_table_scored(half, score, MIN_ANSWERED_SHARE)[one_percent],
                 score,
             );
-            let cell = |(n, stops, wrong): (usize, usize, usize)| {
-                format!(
-                    "{:.3} / {:.3} / {wrong} of {stops} ({:.2} %)",
-                    (stops - wrong) as f64 / n.max(1) as f64,
-                    stops as f64 / n.max(1) as f64,
-                    100.0 * wrong as f64 / stops.max(1) as f64
-                )
-            };
             println!(
-                "| {agent} | {position} / {heading} | {:.5} / {:.5} | {} | {} | {} |",
-                thresholds[0],
-                thresholds[1],
-                cell(checked[0]),
-                cell(checked[1]),
-                cell(checked[2])
+                "{}",
+                calibrate::level_row(
+                    &format!("{agent} | {position} / {heading}"),
+                    thresholds,
+                    checked,
+                    true
+                )
             );
         }
     }

@@ -74,3 +74,38 @@ pub fn cross_checked_by_level(
     }
     (thresholds, checked)
 }
+
+/// One site level's cell of a threshold analysis's table, from [`cross_checked_by_level`]'s
+/// (episodes, stops, wrong stops): the right share first when `with_right`, then the
+/// answered share and the wrong answers of the answered.
+pub fn level_cell((n, stops, wrong): (usize, usize, usize), with_right: bool) -> String {
+    let share = |k: usize| k as f64 / n.max(1) as f64;
+    let right = if with_right {
+        format!("{:.3} / ", share(stops - wrong))
+    } else {
+        String::new()
+    };
+    format!(
+        "{right}{:.3} / {wrong} of {stops} ({:.2} %)",
+        share(stops),
+        100.0 * wrong as f64 / stops.max(1) as f64
+    )
+}
+
+/// One table row of a threshold analysis: the row's leading cells, the two cross-fitted
+/// thresholds and the three site levels' cells ([`level_cell`]).
+pub fn level_row(
+    lead: &str,
+    thresholds: [f32; 2],
+    checked: [(usize, usize, usize); 3],
+    with_right: bool,
+) -> String {
+    format!(
+        "| {lead} | {:.5} / {:.5} | {} | {} | {} |",
+        thresholds[0],
+        thresholds[1],
+        level_cell(checked[0], with_right),
+        level_cell(checked[1], with_right),
+        level_cell(checked[2], with_right)
+    )
+}

@@ -22,7 +22,7 @@ pub use report::{markdown, rust_source};
 
 pub use activesense_instrument::world::sensor::SensorModel;
 use activesense_instrument::world::site::SiteLevel;
-pub use analysis::{cross_checked_by_level, read_samples};
+pub use analysis::{cross_checked_by_level, level_cell, level_row, read_samples};
 use logistic::fit_logistic;
 
 use crate::eval::harness::{episode_bar, EvalOptions};
